@@ -1,0 +1,53 @@
+//! Command-line front end: one file per subcommand, each with its clap `Args` and `run`.
+
+pub mod bench;
+pub mod data;
+pub mod drr;
+pub mod eval;
+pub mod gradcheck;
+pub mod progress;
+pub mod render;
+pub mod train;
+
+use clap::{Parser, Subcommand};
+
+/// unispine: a pure-CPU, deterministic reference for UniSpine-GS (X-ray / ultrasound Gaussian
+/// splatting).
+#[derive(Debug, Parser)]
+#[command(name = "unispine", version, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Subcommands, in pipeline order.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Make a projection dataset (phantom, CT, ultrasound) or import a NAF / X-Gaussian pickle.
+    Data(data::DataArgs),
+    /// Project a volume with our DRR ray-marcher for given angles.
+    Drr(drr::DrrArgs),
+    /// Render Gaussians from a PLY for one view; optionally the gradient of sum(W * image).
+    Render(render::RenderArgs),
+    /// Check every analytic gradient against central finite differences (f64) and print a table.
+    Gradcheck(gradcheck::GradcheckArgs),
+    /// Train a model (methods: unispine, xgaussian, 3dgs, spwm-only).
+    Train(train::TrainArgs),
+    /// Re-evaluate a saved run on its test views.
+    Eval(eval::EvalArgs),
+    /// Benchmarks that print ratios against a baseline measured in the same run.
+    Bench(bench::BenchArgs),
+}
+
+/// Run the parsed command line.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Data(a) => data::run(a),
+        Command::Drr(a) => drr::run(a),
+        Command::Render(a) => render::run(a),
+        Command::Gradcheck(a) => gradcheck::run(a),
+        Command::Train(a) => train::run(a),
+        Command::Eval(a) => eval::run(a),
+        Command::Bench(a) => bench::run(a),
+    }
+}

@@ -1,0 +1,59 @@
+//! Projection datasets: a geometry, training and test views (angles + projections) and a
+//! manifest of units, normalisation and provenance. Stored as a folder (see [`store`]):
+//! `dataset.json`, `train.npy`, `test.npy` (f32 [N, v, u], row 0 = top), `volume.npy`
+//! ([x, y, z]) and PNG previews.
+
+pub mod generate;
+pub mod pickle;
+pub mod store;
+
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::{Camera, ConeBeam};
+use crate::image2d::Image2d;
+
+/// One split: projection angles (radians) and the projections (line integrals) at them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Split {
+    pub angles: Vec<f64>,
+    pub projections: Vec<Image2d<f32>>,
+}
+
+/// What the numbers mean and where they came from (the `dataset.json` manifest minus geometry
+/// and angles).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Unit of the projection values, e.g. "mm * volume value" (line integrals in mm).
+    pub projection_units: String,
+    /// How the volume values were produced (HU conversion, normalisation), human-readable.
+    pub volume_normalisation: String,
+    /// Provenance of the volume (file, phantom seed, crop, resampling).
+    pub provenance: crate::volume::Provenance,
+    /// Projector used ("siddon" / "trilinear") and noise settings.
+    pub projector: String,
+    /// Noise model applied to the projections ("none" or a description).
+    pub noise: String,
+    /// Free-form extra fields (generator settings).
+    #[serde(default)]
+    pub extra: serde_json::Map<String, serde_json::Value>,
+}
+
+/// A projection dataset.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Dataset {
+    pub geometry: ConeBeam,
+    pub train: Split,
+    pub test: Split,
+    pub manifest: Manifest,
+}
+
+impl Dataset {
+    /// Camera of training view `k`.
+    pub fn train_camera(&self, k: usize) -> Camera {
+        self.geometry.camera(self.train.angles[k])
+    }
+    /// Camera of test view `k`.
+    pub fn test_camera(&self, k: usize) -> Camera {
+        self.geometry.camera(self.test.angles[k])
+    }
+}

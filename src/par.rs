@@ -1,0 +1,61 @@
+//! Deterministic parallelism helpers (DESIGN.md principle 4).
+//!
+//! rayon's float `sum`/`reduce`/`fold` change bits with the thread count and even from run to
+//! run. Every parallel reduction in this crate goes through fixed-size chunks whose partial
+//! results are collected in order and reduced sequentially.
+
+use rayon::prelude::*;
+
+/// Fixed chunk length for parallel reductions. Never derived from the thread count.
+pub const CHUNK: usize = 4096;
+
+/// Sum of `x` in f64, bit-identical for any thread count.
+pub fn det_sum<T: Copy + Into<f64> + Sync>(x: &[T]) -> f64 {
+    x.par_chunks(CHUNK)
+        .map(|c| c.iter().map(|&v| v.into()).sum::<f64>())
+        .collect::<Vec<_>>()
+        .into_iter()
+        .sum()
+}
+
+/// Sum of `f(i)` for `i in 0..n`, in f64, bit-identical for any thread count.
+pub fn det_sum_by<F: Fn(usize) -> f64 + Sync>(n: usize, f: F) -> f64 {
+    let chunks = n.div_ceil(CHUNK);
+    (0..chunks)
+        .into_par_iter()
+        .map(|c| {
+            let lo = c * CHUNK;
+            let hi = (lo + CHUNK).min(n);
+            (lo..hi).map(&f).sum::<f64>()
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn det_sum_is_thread_count_invariant() {
+        let x: Vec<f32> = (0..100_003)
+            .map(|i| ((i * 7919) % 1000) as f32 * 1e-3 - 0.4)
+            .collect();
+        let mut bits = Vec::new();
+        for t in [1, 2, 8] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(t)
+                .build()
+                .unwrap();
+            bits.push(pool.install(|| det_sum(&x)).to_bits());
+            bits.push(
+                pool.install(|| det_sum_by(x.len(), |i| x[i] as f64))
+                    .to_bits(),
+            );
+        }
+        assert!(bits.iter().step_by(2).all(|b| *b == bits[0]));
+        assert!(bits.iter().skip(1).step_by(2).all(|b| *b == bits[1]));
+        assert_eq!(bits[0], bits[1]);
+    }
+}

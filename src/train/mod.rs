@@ -1,0 +1,3 @@
+//! The trainer: method presets, the training loop and its progress events.
+
+pub mod config;
