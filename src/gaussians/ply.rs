@@ -1,1 +1,380 @@
-//! TODO
+//! Gaussians as 3DGS-layout PLY: `x y z nx ny nz f_dc_0..2 f_rest_0..44 opacity scale_0..2
+//! rot_0..3`, binary little-endian float32, parameters stored pre-activation (log-scales,
+//! opacity logits, unnormalised quaternions w, x, y, z) exactly as 3DGS writes them, so that our
+//! models open in common splat viewers and X-Gaussian / 3DGS checkpoints load.
+//!
+//! Channels: 3DGS stores three colour channels. Our model has one intensity channel with 16
+//! features: writing repeats it in the three channels; reading averages the three (X-Gaussian
+//! keeps its channels identical, research/xgaussian_unispine.md §1). `f_rest` is channel-major
+//! as in 3DGS (`f_rest_{c * K + (k - 1)}` for channel c and coefficient k >= 1, K = number of
+//! rest coefficients per channel). Files with fewer `f_rest` fields (lower SH degree) load with
+//! the missing features at zero.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::Path;
+
+use crate::error::{Error, Result};
+use crate::gaussians::model::{Gaussians, N_FEATURES};
+use crate::real::Real;
+
+/// Write `g` to `path` in the 3DGS layout (binary little-endian float32).
+pub fn write_ply<R: Real>(path: &Path, g: &Gaussians<R>) -> Result<()> {
+    let rest = N_FEATURES - 1;
+    let mut header = String::from("ply\nformat binary_little_endian 1.0\n");
+    header += &format!("element vertex {}\n", g.len());
+    let mut names: Vec<String> = ["x", "y", "z", "nx", "ny", "nz"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    names.extend((0..3).map(|c| format!("f_dc_{c}")));
+    names.extend((0..3 * rest).map(|i| format!("f_rest_{i}")));
+    names.push("opacity".into());
+    names.extend((0..3).map(|i| format!("scale_{i}")));
+    names.extend((0..4).map(|i| format!("rot_{i}")));
+    for n in &names {
+        header += &format!("property float {n}\n");
+    }
+    header += "end_header\n";
+    let mut buf = Vec::with_capacity(header.len() + g.len() * names.len() * 4);
+    buf.extend_from_slice(header.as_bytes());
+    let mut put = |v: R| buf.extend_from_slice(&(v.f64() as f32).to_le_bytes());
+    for i in 0..g.len() {
+        g.means[i].iter().for_each(|&v| put(v));
+        (0..3).for_each(|_| put(R::zero()));
+        (0..3).for_each(|_| put(g.features[i][0]));
+        for _c in 0..3 {
+            for k in 1..N_FEATURES {
+                put(g.features[i][k]);
+            }
+        }
+        put(g.opacity_logits[i]);
+        g.log_scales[i].iter().for_each(|&v| put(v));
+        g.quats[i].iter().for_each(|&v| put(v));
+    }
+    let mut f = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
+    f.write_all(&buf).map_err(|e| Error::io(path, e))
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Ty {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Ty {
+    fn parse(s: &str) -> Option<Ty> {
+        Some(match s {
+            "char" | "int8" => Ty::I8,
+            "uchar" | "uint8" => Ty::U8,
+            "short" | "int16" => Ty::I16,
+            "ushort" | "uint16" => Ty::U16,
+            "int" | "int32" => Ty::I32,
+            "uint" | "uint32" => Ty::U32,
+            "float" | "float32" => Ty::F32,
+            "double" | "float64" => Ty::F64,
+            _ => return None,
+        })
+    }
+    fn size(self) -> usize {
+        match self {
+            Ty::I8 | Ty::U8 => 1,
+            Ty::I16 | Ty::U16 => 2,
+            Ty::I32 | Ty::U32 | Ty::F32 => 4,
+            Ty::F64 => 8,
+        }
+    }
+    fn read(self, b: &[u8], big: bool) -> f64 {
+        macro_rules! rd {
+            ($t:ty, $n:expr) => {{
+                let a: [u8; $n] = b[..$n].try_into().unwrap();
+                (if big {
+                    <$t>::from_be_bytes(a)
+                } else {
+                    <$t>::from_le_bytes(a)
+                }) as f64
+            }};
+        }
+        match self {
+            Ty::I8 => b[0] as i8 as f64,
+            Ty::U8 => b[0] as f64,
+            Ty::I16 => rd!(i16, 2),
+            Ty::U16 => rd!(u16, 2),
+            Ty::I32 => rd!(i32, 4),
+            Ty::U32 => rd!(u32, 4),
+            Ty::F32 => rd!(f32, 4),
+            Ty::F64 => rd!(f64, 8),
+        }
+    }
+}
+
+/// Read a 3DGS-layout PLY (binary little/big endian or ASCII). The three colour channels are
+/// averaged into our single intensity channel. Errors name the file and the missing or bad field.
+pub fn read_ply<R: Real>(path: &Path) -> Result<Gaussians<R>> {
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut rd = BufReader::new(file);
+    let mut line = String::new();
+    let read_line = |rd: &mut BufReader<std::fs::File>, line: &mut String| -> Result<()> {
+        line.clear();
+        let n = rd.read_line(line).map_err(|e| Error::io(path, e))?;
+        if n == 0 {
+            return Err(Error::format(
+                path,
+                "header",
+                "file ends before `end_header`",
+            ));
+        }
+        Ok(())
+    };
+    read_line(&mut rd, &mut line)?;
+    if line.trim_end() != "ply" {
+        return Err(Error::format(
+            path,
+            "magic",
+            "not a PLY file (first line is not `ply`)",
+        ));
+    }
+    let mut format = None;
+    let mut n_vertex: Option<usize> = None;
+    let mut props: Vec<(String, Ty)> = Vec::new();
+    let mut in_vertex = false;
+    loop {
+        read_line(&mut rd, &mut line)?;
+        let t: Vec<&str> = line.split_whitespace().collect();
+        match t.as_slice() {
+            ["end_header"] => break,
+            ["format", f, _] => format = Some(f.to_string()),
+            ["element", name, n] => {
+                // Elements after the vertices are ignored (they come after them in the body).
+                in_vertex = *name == "vertex";
+                if in_vertex {
+                    n_vertex = Some(n.parse().map_err(|_| {
+                        Error::format(path, "element vertex", format!("bad count `{n}`"))
+                    })?);
+                } else if n_vertex.is_none() {
+                    return Err(Error::format(
+                        path,
+                        "element",
+                        format!("element `{name}` before `vertex` is not supported"),
+                    ));
+                }
+            }
+            ["property", "list", ..] if in_vertex => {
+                return Err(Error::format(
+                    path,
+                    "property",
+                    "list properties in `vertex` are not supported",
+                ));
+            }
+            ["property", ty, name] if in_vertex => {
+                let ty = Ty::parse(ty).ok_or_else(|| {
+                    Error::format(
+                        path,
+                        format!("property {name}"),
+                        format!("unknown type `{ty}`"),
+                    )
+                })?;
+                props.push((name.to_string(), ty));
+            }
+            _ => {}
+        }
+    }
+    let n = n_vertex.ok_or_else(|| Error::format(path, "element vertex", "missing"))?;
+    let format = format.ok_or_else(|| Error::format(path, "format", "missing"))?;
+    let col = |name: &str| -> Result<usize> {
+        props
+            .iter()
+            .position(|(p, _)| p == name)
+            .ok_or_else(|| Error::format(path, name, "missing property"))
+    };
+    let ix_mean = [col("x")?, col("y")?, col("z")?];
+    let ix_scale = [col("scale_0")?, col("scale_1")?, col("scale_2")?];
+    let ix_rot = [col("rot_0")?, col("rot_1")?, col("rot_2")?, col("rot_3")?];
+    let ix_op = col("opacity")?;
+    let ix_dc: Vec<usize> = (0..3)
+        .filter_map(|c| col(&format!("f_dc_{c}")).ok())
+        .collect();
+    if ix_dc.is_empty() {
+        return Err(Error::format(path, "f_dc_0", "missing property"));
+    }
+    let n_rest_total = props
+        .iter()
+        .filter(|(p, _)| p.starts_with("f_rest_"))
+        .count();
+    let ch = ix_dc.len();
+    if n_rest_total % ch != 0 {
+        return Err(Error::format(
+            path,
+            "f_rest_*",
+            format!("{n_rest_total} fields do not split into {ch} channels"),
+        ));
+    }
+    let k_rest = (n_rest_total / ch).min(N_FEATURES - 1);
+    let per_ch = n_rest_total / ch;
+    let mut ix_rest = vec![vec![0usize; k_rest]; ch];
+    for (c, row) in ix_rest.iter_mut().enumerate() {
+        for (k, slot) in row.iter_mut().enumerate() {
+            *slot = col(&format!("f_rest_{}", c * per_ch + k))?;
+        }
+    }
+
+    let mut values = vec![0f64; props.len()];
+    let mut g = Gaussians::<R>::zeros(n);
+    let mut body = Vec::new();
+    rd.read_to_end(&mut body).map_err(|e| Error::io(path, e))?;
+    let stride: usize = props.iter().map(|(_, t)| t.size()).sum();
+    let mut ascii = match format.as_str() {
+        "ascii" => Some(
+            std::str::from_utf8(&body)
+                .map_err(|_| Error::format(path, "format", "ascii body is not UTF-8"))?
+                .split_whitespace(),
+        ),
+        "binary_little_endian" | "binary_big_endian" => {
+            if body.len() < n * stride {
+                return Err(Error::format(
+                    path,
+                    "element vertex",
+                    format!(
+                        "body has {} bytes, {} vertices need {}",
+                        body.len(),
+                        n,
+                        n * stride
+                    ),
+                ));
+            }
+            None
+        }
+        other => {
+            return Err(Error::format(
+                path,
+                "format",
+                format!("unknown format `{other}`"),
+            ))
+        }
+    };
+    let big = format == "binary_big_endian";
+    for i in 0..n {
+        match ascii.as_mut() {
+            Some(it) => {
+                for (p, v) in values.iter_mut().enumerate() {
+                    let tok = it.next().ok_or_else(|| {
+                        Error::format(
+                            path,
+                            "element vertex",
+                            format!("ascii body ends at vertex {i}"),
+                        )
+                    })?;
+                    *v = tok.parse().map_err(|_| {
+                        Error::format(path, &props[p].0, format!("vertex {i}: bad number `{tok}`"))
+                    })?;
+                }
+            }
+            None => {
+                let mut off = i * stride;
+                for (p, v) in values.iter_mut().enumerate() {
+                    *v = props[p].1.read(&body[off..], big);
+                    off += props[p].1.size();
+                }
+            }
+        }
+        for a in 0..3 {
+            g.means[i][a] = R::c(values[ix_mean[a]]);
+            g.log_scales[i][a] = R::c(values[ix_scale[a]]);
+        }
+        for a in 0..4 {
+            g.quats[i][a] = R::c(values[ix_rot[a]]);
+        }
+        g.opacity_logits[i] = R::c(values[ix_op]);
+        g.features[i][0] = R::c(ix_dc.iter().map(|&c| values[c]).sum::<f64>() / ch as f64);
+        for k in 0..k_rest {
+            g.features[i][k + 1] =
+                R::c(ix_rest.iter().map(|row| values[row[k]]).sum::<f64>() / ch as f64);
+        }
+    }
+    g.check_finite()
+        .map_err(|e| Error::format(path, "vertex", e.to_string()))?;
+    Ok(g)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(n: usize) -> Gaussians<f64> {
+        let mut g = Gaussians::<f64>::zeros(n);
+        for i in 0..n {
+            let x = i as f64;
+            g.means[i] = [x, -2.0 * x, 0.5 + x];
+            g.log_scales[i] = [-1.0 - x, 0.25, 1.5];
+            g.quats[i] = [1.0, 0.1 * x, -0.2, 0.3];
+            g.opacity_logits[i] = -2.0 + x;
+            for k in 0..N_FEATURES {
+                g.features[i][k] = 0.125 * (k as f64) - x;
+            }
+        }
+        g
+    }
+
+    #[test]
+    fn round_trip_is_exact_in_f32() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("m.ply");
+        let g = sample(5);
+        write_ply(&p, &g).unwrap();
+        let back: Gaussians<f64> = read_ply(&p).unwrap();
+        let expect = g.cast::<f32>().cast::<f64>();
+        assert_eq!(back, expect);
+    }
+
+    #[test]
+    fn channels_are_averaged_and_short_rest_is_zero_padded() {
+        // An ASCII file with SH degree 1 (3 rest coefficients per channel) and distinct channels.
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a.ply");
+        let mut s = String::from("ply\nformat ascii 1.0\nelement vertex 1\n");
+        for n in ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2"] {
+            s += &format!("property float {n}\n");
+        }
+        for i in 0..9 {
+            s += &format!("property float f_rest_{i}\n");
+        }
+        for n in [
+            "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3",
+        ] {
+            s += &format!("property double {n}\n");
+        }
+        s += "end_header\n1 2 3  0.1 0.2 0.3  1 2 3 4 5 6 7 8 9  0.5 -1 -2 -3 1 0 0 0\n";
+        std::fs::write(&p, s).unwrap();
+        let g: Gaussians<f64> = read_ply(&p).unwrap();
+        assert!((g.features[0][0] - 0.2).abs() < 1e-7);
+        // f_rest is channel-major: coefficient 1 is f_rest_0, f_rest_3, f_rest_6 -> mean 4.
+        assert_eq!(&g.features[0][1..4], &[4.0, 5.0, 6.0]);
+        assert!(g.features[0][4..].iter().all(|&v| v == 0.0));
+        assert_eq!(g.log_scales[0], [-1.0, -2.0, -3.0]);
+    }
+
+    #[test]
+    fn missing_property_and_truncated_body_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("bad.ply");
+        std::fs::write(&p, "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\nend_header\n").unwrap();
+        let e = read_ply::<f32>(&p).unwrap_err().to_string();
+        assert!(e.contains("bad.ply") && e.contains("`y`"), "{e}");
+        let g = sample(3);
+        write_ply(&p, &g).unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        std::fs::write(&p, &bytes[..bytes.len() - 10]).unwrap();
+        let e = read_ply::<f32>(&p).unwrap_err().to_string();
+        assert!(e.contains("element vertex"), "{e}");
+        std::fs::write(&p, "not a ply").unwrap();
+        assert!(read_ply::<f32>(&p)
+            .unwrap_err()
+            .to_string()
+            .contains("magic"));
+    }
+}
