@@ -1,10 +1,271 @@
-//! `unispine render` (not yet implemented).
+//! `unispine render`: render Gaussians from a 3DGS-layout PLY for one view and, optionally, the
+//! gradient of sum(W * image) with respect to every stored PLY field. This is how another backend
+//! (or a person) audits a forward pass or a gradient without writing Rust.
+//!
+//! Outputs in `--out`:
+//! - `image.npy`: f32 [v, u], row 0 = top;
+//! - `image.png`: the same, min-max scaled to 8 bits;
+//! - `grads.npz` (with `--grad-weights W.npy`): one array per PLY field group, in the PLY's stored
+//!   (pre-activation) parametrisation and in the computing precision (f64 by default):
+//!   `xyz` [N, 3], `features` [N, 3 + 3 K] (`f_dc_0..2` then `f_rest_0..3K-1`, channel-major as
+//!   stored; K = rest coefficients per channel present in the file), `opacity` [N] (logit),
+//!   `scale` [N, 3] (log-scale), `rot` [N, 4] (unnormalised quaternion w, x, y, z).
+//!   The file's three colour channels are averaged into our single channel on reading, so the
+//!   gradient of each stored channel is one third of the gradient of the averaged feature.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use ndarray::{Array1, Array2};
+
+use crate::gaussians::{ply, Gaussians};
+use crate::geometry::{Camera, ConeBeam};
+use crate::image2d::Image2d;
+use crate::real::Real;
+use crate::render::{self, ColorMode, RenderSettings};
 
 /// Arguments of `unispine render`.
 #[derive(Debug, clap::Args)]
-pub struct RenderArgs {}
+pub struct RenderArgs {
+    /// Gaussians in the 3DGS PLY layout (pre-activation parameters, as 3DGS and X-Gaussian write).
+    #[arg(long)]
+    pub ply: PathBuf,
+    /// Dataset folder (from `unispine data`) whose geometry and view angle to use.
+    #[arg(long, conflicts_with_all = ["geometry", "angle_deg"], requires = "view")]
+    pub dataset: Option<PathBuf>,
+    /// View of the dataset: `test:K` or `train:K` (K counts from 0).
+    #[arg(long, requires = "dataset")]
+    pub view: Option<String>,
+    /// TIGRE / NAF geometry JSON (DSD, DSO, nDetector, dDetector, nVoxel, dVoxel, offOrigin,
+    /// offDetector, mode), lengths in mm.
+    #[arg(long, requires = "angle_deg")]
+    pub geometry: Option<PathBuf>,
+    /// Projection angle in degrees (with `--geometry`).
+    #[arg(long, requires = "geometry", allow_hyphen_values = true)]
+    pub angle_deg: Option<f64>,
+    /// Intensity model: `rirf-paper` (Eq. 2, sigmoid), `rirf-xgaussian` (X-Gaussian code,
+    /// max(0, 0.5 + lambda . f)) or `sh` (view-dependent SH colour, the 3DGS baseline).
+    #[arg(long, value_enum, default_value = "rirf-paper")]
+    pub color: ColorArg,
+    /// Number of active features / SH coefficients (1, 4, 9 or 16).
+    #[arg(long, default_value_t = 16)]
+    pub active_features: usize,
+    /// Background value (added with the final transmittance).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub background: f64,
+    /// Upstream gradient W (npy, f32 or f64, shape [v, u]): also write the gradient of
+    /// sum(W * image) with respect to every stored PLY field to `grads.npz`.
+    #[arg(long)]
+    pub grad_weights: Option<PathBuf>,
+    /// Arithmetic precision of the rasterizer.
+    #[arg(long, value_enum, default_value = "f64")]
+    pub precision: Precision,
+    /// Output folder (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// `--color` values.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum ColorArg {
+    RirfPaper,
+    RirfXgaussian,
+    Sh,
+}
+
+/// `--precision` values.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum Precision {
+    F32,
+    F64,
+}
 
 /// Run `unispine render`.
-pub fn run(_args: RenderArgs) -> anyhow::Result<()> {
-    anyhow::bail!("`unispine render` is not implemented yet")
+pub fn run(args: RenderArgs) -> anyhow::Result<()> {
+    if ![1, 4, 9, 16].contains(&args.active_features) {
+        bail!(
+            "--active-features must be 1, 4, 9 or 16 (got {})",
+            args.active_features
+        );
+    }
+    let cam = camera(&args)?;
+    let settings = RenderSettings {
+        color: match args.color {
+            ColorArg::RirfPaper => ColorMode::RirfPaper,
+            ColorArg::RirfXgaussian => ColorMode::RirfXgaussian,
+            ColorArg::Sh => ColorMode::Sh,
+        },
+        active_features: args.active_features,
+        background: args.background,
+    };
+    let weights = match &args.grad_weights {
+        Some(p) => Some(read_weights(p, &cam)?),
+        None => None,
+    };
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
+    match args.precision {
+        Precision::F32 => render_and_write::<f32>(&args, &cam, &settings, weights.as_ref()),
+        Precision::F64 => render_and_write::<f64>(&args, &cam, &settings, weights.as_ref()),
+    }
+}
+
+/// The camera named by `--dataset/--view` or `--geometry/--angle-deg`.
+fn camera(args: &RenderArgs) -> anyhow::Result<Camera> {
+    if let (Some(dir), Some(view)) = (&args.dataset, &args.view) {
+        let ds = crate::dataset::store::load(dir)?;
+        let (split, k) = view
+            .split_once(':')
+            .and_then(|(s, k)| k.parse::<usize>().ok().map(|k| (s, k)))
+            .with_context(|| format!("--view must be `test:K` or `train:K` (got `{view}`)"))?;
+        let angles = match split {
+            "test" => &ds.test.angles,
+            "train" => &ds.train.angles,
+            _ => bail!("--view split must be `test` or `train` (got `{split}`)"),
+        };
+        let angle = *angles.get(k).with_context(|| {
+            format!(
+                "--view {view}: the dataset {} has {} {split} views (K counts from 0)",
+                dir.display(),
+                angles.len()
+            )
+        })?;
+        return Ok(ds.geometry.camera(angle));
+    }
+    if let (Some(g), Some(a)) = (&args.geometry, args.angle_deg) {
+        let text = std::fs::read_to_string(g)
+            .with_context(|| format!("cannot read geometry file {}", g.display()))?;
+        let geo: ConeBeam = serde_json::from_str(&text)
+            .with_context(|| format!("geometry file {}: not a TIGRE/NAF geometry", g.display()))?;
+        geo.validate()
+            .with_context(|| format!("geometry file {}", g.display()))?;
+        if !a.is_finite() {
+            bail!("--angle-deg must be finite (got {a})");
+        }
+        return Ok(geo.camera(a.to_radians()));
+    }
+    bail!("give either --dataset DIR --view test:K, or --geometry G.json --angle-deg A")
+}
+
+/// The upstream gradient W, checked against the image shape.
+fn read_weights(path: &Path, cam: &Camera) -> anyhow::Result<Image2d<f64>> {
+    let arr: Array2<f64> = match ndarray_npy::read_npy::<_, Array2<f64>>(path) {
+        Ok(a) => a,
+        Err(_) => ndarray_npy::read_npy::<_, Array2<f32>>(path)
+            .map(|a| a.mapv(f64::from))
+            .with_context(|| {
+                format!(
+                    "--grad-weights {}: expected a 2-D f32 or f64 npy array [v, u]",
+                    path.display()
+                )
+            })?,
+    };
+    let (h, w) = arr.dim();
+    if (h, w) != (cam.height, cam.width) {
+        bail!(
+            "--grad-weights {}: shape [{h}, {w}] does not match the detector [v, u] = [{}, {}]",
+            path.display(),
+            cam.height,
+            cam.width
+        );
+    }
+    let data: Vec<f64> = arr.iter().copied().collect();
+    crate::error::check_finite(&format!("--grad-weights {}", path.display()), &data)?;
+    Ok(Image2d::from_vec(w, h, data))
+}
+
+fn render_and_write<R: Real>(
+    args: &RenderArgs,
+    cam: &Camera,
+    settings: &RenderSettings,
+    weights: Option<&Image2d<f64>>,
+) -> anyhow::Result<()> {
+    let g: Gaussians<R> = ply::read_ply(&args.ply)?;
+    let (img, saved) = render::forward(&g, cam, settings)
+        .with_context(|| format!("rendering {}", args.ply.display()))?;
+    let img32: Vec<f32> = img.data.iter().map(|v| v.f64() as f32).collect();
+    let arr = Array2::from_shape_vec((img.height, img.width), img32.clone())?;
+    let npy = args.out.join("image.npy");
+    ndarray_npy::write_npy(&npy, &arr).with_context(|| format!("writing {}", npy.display()))?;
+    write_png(
+        &args.out.join("image.png"),
+        &Image2d::from_vec(img.width, img.height, img32),
+    )?;
+    println!("image: {}", npy.display());
+
+    if let Some(w) = weights {
+        let d_image: Image2d<R> = w.cast();
+        let grads = render::backward(&g, cam, settings, &saved, &d_image);
+        let n_rest = rest_per_channel(&args.ply)?;
+        let path = args.out.join("grads.npz");
+        write_grads(&path, &grads.params, n_rest)?;
+        println!("gradients of sum(W * image): {}", path.display());
+    }
+    Ok(())
+}
+
+/// Number of `f_rest` coefficients per channel stored in the PLY (0, 3, 8 or 15).
+fn rest_per_channel(path: &Path) -> anyhow::Result<usize> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let end = bytes
+        .windows(10)
+        .position(|w| w == b"end_header")
+        .with_context(|| format!("{}: no PLY header", path.display()))?;
+    let header = String::from_utf8_lossy(&bytes[..end]);
+    let n = header
+        .lines()
+        .filter(|l| {
+            l.split_whitespace()
+                .last()
+                .is_some_and(|p| p.starts_with("f_rest_"))
+        })
+        .count();
+    Ok(n / 3)
+}
+
+/// Gradients with respect to the stored PLY fields (see the module header).
+fn write_grads<R: Real>(path: &Path, d: &Gaussians<R>, n_rest: usize) -> anyhow::Result<()> {
+    let n = d.len();
+    let f = |x: R| x.f64();
+    let xyz = Array2::from_shape_fn((n, 3), |(i, a)| f(d.means[i][a]));
+    let scale = Array2::from_shape_fn((n, 3), |(i, a)| f(d.log_scales[i][a]));
+    let rot = Array2::from_shape_fn((n, 4), |(i, a)| f(d.quats[i][a]));
+    let opacity = Array1::from_shape_fn(n, |i| f(d.opacity_logits[i]));
+    // Stored order: f_dc_0..2 (coefficient 0 per channel), then f_rest_{c * K + (k - 1)}.
+    let third = 1.0 / 3.0;
+    let features = Array2::from_shape_fn((n, 3 + 3 * n_rest), |(i, j)| {
+        let k = if j < 3 { 0 } else { (j - 3) % n_rest + 1 };
+        f(d.features[i][k]) * third
+    });
+    let file =
+        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut npz = ndarray_npy::NpzWriter::new(file);
+    npz.add_array("xyz", &xyz)?;
+    npz.add_array("features", &features)?;
+    npz.add_array("opacity", &opacity)?;
+    npz.add_array("scale", &scale)?;
+    npz.add_array("rot", &rot)?;
+    npz.finish()?;
+    Ok(())
+}
+
+/// An image min-max scaled to 8 bits (constant images are black).
+pub fn write_png(path: &Path, img: &Image2d<f32>) -> anyhow::Result<()> {
+    let (lo, hi) = img
+        .data
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
+            (l.min(v), h.max(v))
+        });
+    let scale = if hi > lo { 255.0 / (hi - lo) } else { 0.0 };
+    let px: Vec<u8> = img
+        .data
+        .iter()
+        .map(|&v| ((v - lo) * scale).round().clamp(0.0, 255.0) as u8)
+        .collect();
+    image::GrayImage::from_raw(img.width as u32, img.height as u32, px)
+        .context("image buffer size")?
+        .save(path)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
 }

@@ -1,1 +1,1 @@
-//! TODO
+//! Dataset generation with the paper protocol (not written yet).

@@ -45,6 +45,9 @@ pub struct Dataset {
     pub train: Split,
     pub test: Split,
     pub manifest: Manifest,
+    /// The ground-truth volume the projections came from (absent for imported pickles that
+    /// carry none).
+    pub volume: Option<crate::volume::Volume<f32>>,
 }
 
 impl Dataset {

@@ -78,3 +78,67 @@ pub struct SplatGrads<R: Real> {
     pub opacity: Vec<R>,
     pub color: Vec<R>,
 }
+
+/// What [`backward`] needs from [`forward`].
+#[derive(Clone, Debug)]
+pub struct RenderSaved<R: Real> {
+    pub splats: Splats<R>,
+    pub project: project::ProjectSaved<R>,
+    pub composite: composite::CompositeSaved<R>,
+}
+
+/// Gradients of a scalar loss from [`backward`].
+#[derive(Clone, Debug)]
+pub struct RenderGrads<R: Real> {
+    /// d loss / d parameter, same layout as the model (pre-activation).
+    pub params: crate::gaussians::Gaussians<R>,
+    /// |d loss / d mean2d| with the mean in NDC (3DGS's densification statistic).
+    pub mean2d_ndc_norm: Vec<R>,
+    /// Gaussian drawn in this view (radius > 0).
+    pub visible: Vec<bool>,
+    /// Screen radius in pixels (0 = culled), for the screen-size prune.
+    pub radius: Vec<u32>,
+}
+
+/// Render `g` from `cam`: projection then compositing.
+pub fn forward<R: Real>(
+    g: &crate::gaussians::Gaussians<R>,
+    cam: &crate::geometry::Camera,
+    settings: &RenderSettings,
+) -> crate::error::Result<(crate::image2d::Image2d<R>, RenderSaved<R>)> {
+    let (splats, ps) = project::forward(g, cam, settings)?;
+    let (img, cs) = composite::forward(&splats, cam.width, cam.height, R::c(settings.background));
+    Ok((
+        img,
+        RenderSaved {
+            splats,
+            project: ps,
+            composite: cs,
+        },
+    ))
+}
+
+/// Gradients of sum(d_image * image) with respect to every parameter of `g`.
+pub fn backward<R: Real>(
+    g: &crate::gaussians::Gaussians<R>,
+    cam: &crate::geometry::Camera,
+    settings: &RenderSettings,
+    saved: &RenderSaved<R>,
+    d_image: &crate::image2d::Image2d<R>,
+) -> RenderGrads<R> {
+    let ds = composite::backward(&saved.splats, &saved.composite, d_image);
+    let params = project::backward(g, cam, settings, &saved.project, &ds);
+    let (w, h) = (R::c(cam.width as f64), R::c(cam.height as f64));
+    let half = R::c(0.5);
+    let mean2d_ndc_norm = ds
+        .mean2d
+        .iter()
+        .map(|d| ((d[0] * w * half).powi(2) + (d[1] * h * half).powi(2)).sqrt())
+        .collect();
+    RenderGrads {
+        params,
+        mean2d_ndc_norm,
+        visible: saved.splats.radius.iter().map(|&r| r > 0).collect(),
+        radius: saved.splats.radius.clone(),
+    }
+}

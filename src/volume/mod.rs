@@ -139,3 +139,33 @@ impl<R: Real> Volume<R> {
         Ok(())
     }
 }
+
+/// A label volume (segmentation ids, 0 = background) on the same grid conventions as
+/// [`Volume`]: `data[i + nx * (j + ny * k)]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LabelMap {
+    pub data: Vec<u16>,
+    pub dims: [usize; 3],
+    pub spacing: [f64; 3],
+    pub offset: [f64; 3],
+}
+
+/// Load a scalar volume, choosing the reader from the file name: `.nii`, `.nii.gz` (NIfTI),
+/// `.mha`, `.mhd` (MetaImage) or `.npy` ([x, y, z], 1 mm voxels unless a sidecar says otherwise).
+/// Values are returned as stored (NIfTI slope/intercept applied); no HU conversion.
+pub fn load(path: &std::path::Path) -> crate::error::Result<Volume<f32>> {
+    Err(crate::error::Error::format(
+        path,
+        "file",
+        "volume readers are not implemented yet",
+    ))
+}
+
+/// Load a label volume (NIfTI or MetaImage) and round its values to label ids.
+pub fn load_labels(path: &std::path::Path) -> crate::error::Result<LabelMap> {
+    Err(crate::error::Error::format(
+        path,
+        "file",
+        "label readers are not implemented yet",
+    ))
+}

@@ -1,0 +1,265 @@
+//! `unispine render`: outputs, the gradient of sum(W * image) with respect to the stored PLY
+//! fields (checked by central differences through the command itself, on PLY files written by an
+//! independent writer below), and errors for bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use ndarray::{Array1, Array2};
+
+const BIN: &str = env!("CARGO_BIN_EXE_unispine");
+
+/// One Gaussian as stored in a 3DGS PLY (62 float32 fields).
+#[derive(Clone)]
+struct Stored {
+    xyz: [f32; 3],
+    f_dc: [f32; 3],
+    f_rest: [f32; 45],
+    opacity: f32,
+    scale: [f32; 3],
+    rot: [f32; 4],
+}
+
+/// A 3DGS-layout binary PLY written field by field (independent of the crate's writer).
+fn write_ply(path: &Path, gs: &[Stored]) {
+    let mut h = String::from("ply\nformat binary_little_endian 1.0\n");
+    h += &format!("element vertex {}\n", gs.len());
+    let mut names: Vec<String> = ["x", "y", "z", "nx", "ny", "nz"].map(String::from).to_vec();
+    names.extend((0..3).map(|i| format!("f_dc_{i}")));
+    names.extend((0..45).map(|i| format!("f_rest_{i}")));
+    names.push("opacity".into());
+    names.extend((0..3).map(|i| format!("scale_{i}")));
+    names.extend((0..4).map(|i| format!("rot_{i}")));
+    for n in &names {
+        h += &format!("property float {n}\n");
+    }
+    h += "end_header\n";
+    let mut bytes = h.into_bytes();
+    for g in gs {
+        let mut v: Vec<f32> = g.xyz.to_vec();
+        v.extend([0.0; 3]);
+        v.extend(g.f_dc);
+        v.extend(g.f_rest);
+        v.push(g.opacity);
+        v.extend(g.scale);
+        v.extend(g.rot);
+        for x in v {
+            bytes.extend(x.to_le_bytes());
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+fn scene() -> Vec<Stored> {
+    let mk = |xyz: [f32; 3], s: f32, o: f32, f0: f32| {
+        let mut f_rest = [0.0f32; 45];
+        // A little view-independent structure in the first rest coefficient of each channel.
+        for c in 0..3 {
+            f_rest[c * 15] = 0.125 * (c as f32 + 1.0);
+        }
+        Stored {
+            xyz,
+            f_dc: [f0, f0 + 0.25, f0 - 0.25],
+            f_rest,
+            opacity: o,
+            scale: [s, s + 0.25, s - 0.125],
+            rot: [1.0, 0.125, -0.25, 0.0625],
+        }
+    };
+    vec![
+        mk([0.0, 0.0, 0.0], 2.0, 0.0, 0.5),
+        mk([6.0, -4.0, 5.0], 1.75, -0.5, -0.25),
+        mk([-7.0, 3.0, -6.0], 2.25, 0.5, 0.25),
+    ]
+}
+
+fn write_geometry(dir: &Path) -> PathBuf {
+    let p = dir.join("geometry.json");
+    std::fs::write(
+        &p,
+        r#"{"DSD": 1500.0, "DSO": 1000.0, "nDetector": [24, 28], "dDetector": [4.0, 4.0],
+            "nVoxel": [32, 32, 32], "dVoxel": [2.0, 2.0, 2.0], "offDetector": [2.0, -3.0]}"#,
+    )
+    .unwrap();
+    p
+}
+
+fn run(args: &[&str]) -> std::process::Output {
+    Command::new(BIN).args(args).output().expect("run unispine")
+}
+
+fn render(ply: &Path, geo: &Path, out: &Path, weights: Option<&Path>) -> Array2<f32> {
+    let mut a = vec![
+        "render".to_string(),
+        "--ply".into(),
+        ply.display().to_string(),
+        "--geometry".into(),
+        geo.display().to_string(),
+        "--angle-deg".into(),
+        "30".into(),
+        "--out".into(),
+        out.display().to_string(),
+    ];
+    if let Some(w) = weights {
+        a.push("--grad-weights".into());
+        a.push(w.display().to_string());
+    }
+    let o = Command::new(BIN).args(&a).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    ndarray_npy::read_npy(out.join("image.npy")).unwrap()
+}
+
+#[test]
+fn render_writes_image_and_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("m.ply");
+    write_ply(&ply, &scene());
+    let geo = write_geometry(dir.path());
+    let img = render(&ply, &geo, &dir.path().join("out"), None);
+    assert_eq!(img.dim(), (24, 28));
+    assert!(img.iter().all(|v| v.is_finite()));
+    assert!(
+        img.iter().cloned().fold(0.0f32, f32::max) > 0.05,
+        "scene is visible"
+    );
+    assert!(dir.path().join("out/image.png").exists());
+    assert!(!dir.path().join("out/grads.npz").exists());
+}
+
+/// Gradients from `grads.npz` against central differences of sum(W * image), each stored field
+/// perturbed in its own PLY file. The PLY stores f32, so the step is a power of two and the
+/// tolerance is set by the f32 rounding of the image (1e-7 relative) over the step, not by the
+/// model: 2e-3 relative to the largest gradient of the group.
+#[test]
+fn grads_match_central_differences_of_stored_fields() {
+    let dir = tempfile::tempdir().unwrap();
+    let geo = write_geometry(dir.path());
+    let base = scene();
+    let ply = dir.path().join("m.ply");
+    write_ply(&ply, &base);
+    let (h, w) = (24usize, 28usize);
+    let wts = Array2::from_shape_fn((h, w), |(r, c)| ((r * 7 + c * 3) % 11) as f64 / 11.0 - 0.3);
+    let wpath = dir.path().join("w.npy");
+    ndarray_npy::write_npy(&wpath, &wts).unwrap();
+    let out = dir.path().join("out");
+    render(&ply, &geo, &out, Some(&wpath));
+    let mut npz =
+        ndarray_npy::NpzReader::new(std::fs::File::open(out.join("grads.npz")).unwrap()).unwrap();
+    let xyz: Array2<f64> = npz.by_name("xyz").unwrap();
+    let feats: Array2<f64> = npz.by_name("features").unwrap();
+    let opac: Array1<f64> = npz.by_name("opacity").unwrap();
+    let scale: Array2<f64> = npz.by_name("scale").unwrap();
+    let rot: Array2<f64> = npz.by_name("rot").unwrap();
+    assert_eq!(xyz.dim(), (3, 3));
+    assert_eq!(feats.dim(), (3, 48));
+    assert_eq!(opac.dim(), 3);
+    assert_eq!(scale.dim(), (3, 3));
+    assert_eq!(rot.dim(), (3, 4));
+
+    let objective = |gs: &[Stored], tag: &str| -> f64 {
+        let p = dir.path().join(format!("{tag}.ply"));
+        write_ply(&p, gs);
+        let img = render(&p, &geo, &dir.path().join(tag), None);
+        img.iter().zip(wts.iter()).map(|(a, b)| *a as f64 * b).sum()
+    };
+    // (group, gaussian, field setter, analytic value, step)
+    type Setter = fn(&mut Stored, f32);
+    let cases: Vec<(&str, usize, Setter, f64, f32)> = vec![
+        ("xyz", 1, |g, d| g.xyz[0] += d, xyz[[1, 0]], 1.0 / 64.0),
+        ("xyz", 2, |g, d| g.xyz[2] += d, xyz[[2, 2]], 1.0 / 64.0),
+        (
+            "f_dc_1",
+            0,
+            |g, d| g.f_dc[1] += d,
+            feats[[0, 1]],
+            1.0 / 64.0,
+        ),
+        (
+            "f_rest_15",
+            1,
+            |g, d| g.f_rest[15] += d,
+            feats[[1, 3 + 15]],
+            1.0 / 64.0,
+        ),
+        ("opacity", 2, |g, d| g.opacity += d, opac[2], 1.0 / 64.0),
+        (
+            "scale_1",
+            0,
+            |g, d| g.scale[1] += d,
+            scale[[0, 1]],
+            1.0 / 256.0,
+        ),
+        ("rot_2", 1, |g, d| g.rot[2] += d, rot[[1, 2]], 1.0 / 256.0),
+    ];
+    for (name, i, set, analytic, step) in cases {
+        let mut p = base.clone();
+        set(&mut p[i], step);
+        let mut m = base.clone();
+        set(&mut m[i], -step);
+        let fd = (objective(&p, "p") - objective(&m, "m")) / (2.0 * step as f64);
+        let scale_ref = analytic.abs().max(fd.abs()).max(1e-3);
+        assert!(
+            (analytic - fd).abs() <= 2e-3 * scale_ref,
+            "{name} of Gaussian {i}: analytic {analytic} vs central difference {fd}"
+        );
+    }
+}
+
+#[test]
+fn bad_inputs_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let geo = write_geometry(dir.path());
+    let ply = dir.path().join("m.ply");
+    write_ply(&ply, &scene());
+    let out = dir.path().join("out").display().to_string();
+    let (g, p) = (geo.display().to_string(), ply.display().to_string());
+
+    let o = run(&[
+        "render",
+        "--ply",
+        "nope.ply",
+        "--geometry",
+        &g,
+        "--angle-deg",
+        "0",
+        "--out",
+        &out,
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("nope.ply"));
+
+    let wrong = dir.path().join("w.npy");
+    ndarray_npy::write_npy(&wrong, &Array2::<f32>::zeros((5, 5))).unwrap();
+    let wp = wrong.display().to_string();
+    let args = [
+        "render",
+        "--ply",
+        &p,
+        "--geometry",
+        &g,
+        "--angle-deg",
+        "0",
+        "--out",
+        &out,
+    ];
+    let o = run(&[&args[..], &["--grad-weights", &wp]].concat());
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("does not match") && e.contains("w.npy"), "{e}");
+
+    let o = run(&["render", "--ply", &p, "--out", &out]);
+    assert!(!o.status.success(), "no view given");
+
+    let o = run(&[&args[..], &["--active-features", "5"]].concat());
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("active-features"));
+
+    // A NaN in the model is reported, not rendered.
+    let mut s = scene();
+    s[1].opacity = f32::NAN;
+    write_ply(&ply, &s);
+    let o = run(&args);
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("opacity") || e.contains("NaN"), "{e}");
+}
