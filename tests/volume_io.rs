@@ -930,3 +930,279 @@ fn real_ultrasound_phantom_header() {
     assert!((nonzero - 0.29).abs() < 0.005, "{nonzero}");
     assert!(v.provenance.steps.iter().any(|s| s.contains("zlib")));
 }
+
+// ---------------------------------------------------------------------------------------------
+// Crop, pad, resample
+
+use unispine::volume::resample::{self, IndexBox};
+use unispine::volume::LabelMap;
+
+fn labelled_grid() -> (Volume<f64>, LabelMap) {
+    let dims = [20, 16, 12];
+    let spacing = [0.5, 1.0, 2.5];
+    let mut v = Volume::<f64>::zeros(dims, spacing);
+    v.offset = [1.0, -2.0, 3.0];
+    let mut l = LabelMap {
+        data: vec![0; dims[0] * dims[1] * dims[2]],
+        dims,
+        spacing,
+        offset: v.offset,
+    };
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let n = v.index(i, j, k);
+                v.data[n] = ramp_value(i, j, k);
+                // id 30 in a block, id 7 (not a vertebra) elsewhere.
+                if (8..=11).contains(&i) && (5..=6).contains(&j) && (4..=7).contains(&k) {
+                    l.data[n] = 30;
+                } else if i == 1 && j == 1 && k == 1 {
+                    l.data[n] = 7;
+                }
+            }
+        }
+    }
+    l.data[v.index(12, 9, 5)] = 44;
+    (v, l)
+}
+
+#[test]
+fn crop_to_labels_keeps_world_placement_and_names_missing_ids() {
+    let (v, l) = labelled_grid();
+    // Bounding box of ids 25..=50: i 8..=12, j 5..=9, k 4..=7. A 1.2 mm margin is 3 voxels in x
+    // (0.5 mm), 2 in y (1 mm), 1 in z (2.5 mm); clamped to the grid.
+    let c = resample::crop_to_labels(&v, &l, &(25..=50), 1.2).unwrap();
+    let b = IndexBox {
+        lo: [5, 3, 3],
+        hi: [15, 11, 8],
+    };
+    assert_eq!(resample::label_box(&l, &(25..=50), 1.2).unwrap(), b);
+    assert_eq!(c.dims, [11, 9, 6]);
+    assert_eq!(c.spacing, v.spacing);
+    for k in 0..c.dims[2] {
+        for j in 0..c.dims[1] {
+            for i in 0..c.dims[0] {
+                let (oi, oj, ok) = (i + 5, j + 3, k + 3);
+                assert_eq!(c.get(i, j, k), v.get(oi, oj, ok));
+                let (p, q) = (
+                    c.voxel_to_world([i as f64, j as f64, k as f64]),
+                    v.voxel_to_world([oi as f64, oj as f64, ok as f64]),
+                );
+                for a in 0..3 {
+                    assert!((p[a] - q[a]).abs() < 1e-12, "{p:?} {q:?}");
+                }
+            }
+        }
+    }
+    assert!(c.provenance.steps.last().unwrap().contains("25..=50"));
+    // A list of ids, clamping at the grid border.
+    let b = resample::label_box(&l, &[7u16, 30], 100.0).unwrap();
+    assert_eq!(
+        b,
+        IndexBox {
+            lo: [0, 0, 0],
+            hi: [19, 15, 11]
+        }
+    );
+    // The label map crops the same way.
+    let cl = resample::crop_labels(&l, &resample::label_box(&l, &(25..=50), 0.0).unwrap()).unwrap();
+    assert_eq!(cl.dims, [5, 5, 4]);
+    assert_eq!(cl.data.iter().filter(|&&x| x == 30).count(), 32);
+    // Recentring.
+    let mut r = c.clone();
+    resample::recentre(&mut r);
+    assert_eq!(r.offset, [0.0; 3]);
+    assert!(r.provenance.steps.last().unwrap().contains("recentred"));
+    // No voxel with those ids: the error names them.
+    let e = resample::crop_to_labels(&v, &l, &(60..=70), 10.0)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("60..=70"), "{e}");
+    let e = resample::crop_to_labels(&v, &l, &[99u16, 100][..], 10.0)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("[99, 100]"), "{e}");
+    // Labels on another grid.
+    let mut l2 = l.clone();
+    l2.spacing[2] = 2.0;
+    let e = resample::crop_to_labels(&v, &l2, &(25..=50), 10.0)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("label grid"), "{e}");
+}
+
+#[test]
+fn pad_keeps_world_placement() {
+    let (v, _) = labelled_grid();
+    let p = resample::pad(&v, [1, 2, 0], [3, 0, 1], -1000.0);
+    assert_eq!(p.dims, [24, 18, 13]);
+    assert_eq!(p.get(0, 0, 0), -1000.0);
+    assert_eq!(p.get(23, 17, 12), -1000.0);
+    for (i, j, k) in [(0, 0, 0), (19, 15, 11), (4, 7, 3)] {
+        assert_eq!(p.get(i + 1, j + 2, k), v.get(i, j, k));
+        let a = p.voxel_to_world([(i + 1) as f64, (j + 2) as f64, k as f64]);
+        let b = v.voxel_to_world([i as f64, j as f64, k as f64]);
+        for x in 0..3 {
+            assert!((a[x] - b[x]).abs() < 1e-12);
+        }
+    }
+    // Extents 10, 16, 30 mm: a 30 mm cube is 60 x 30 x 12 voxels.
+    let c = resample::pad_to_cube(&v, 0.0);
+    assert_eq!(c.dims, [60, 30, 12]);
+    assert_eq!(c.size_mm(), [30.0, 30.0, 30.0]);
+    assert_eq!(c.get(20, 7, 0), v.get(0, 0, 0));
+}
+
+/// A linear function of world position.
+fn world_ramp(p: [f64; 3]) -> f64 {
+    3.0 + 0.5 * p[0] - 0.25 * p[1] + 2.0 * p[2]
+}
+
+#[test]
+fn trilinear_resampling_reproduces_a_linear_ramp_at_interior_points() {
+    let mut v = Volume::<f64>::zeros([10, 8, 6], [1.0, 1.5, 2.0]);
+    v.offset = [3.0, -2.0, 1.0];
+    for k in 0..6 {
+        for j in 0..8 {
+            for i in 0..10 {
+                let n = v.index(i, j, k);
+                v.data[n] = world_ramp(v.voxel_to_world([i as f64, j as f64, k as f64]));
+            }
+        }
+    }
+    for dims in [[17, 5, 9], [10, 8, 6], [4, 16, 3]] {
+        let r = resample::resample_trilinear(&v, dims).unwrap();
+        assert_eq!(r.dims, dims);
+        assert_eq!(r.offset, v.offset);
+        for a in 0..3 {
+            assert!((r.size_mm()[a] - v.size_mm()[a]).abs() < 1e-12);
+        }
+        let mut interior = 0;
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    let w = r.voxel_to_world([i as f64, j as f64, k as f64]);
+                    let f = v.world_to_voxel(w);
+                    let inside = (0..3).all(|a| f[a] >= 0.0 && f[a] <= (v.dims[a] - 1) as f64);
+                    if inside {
+                        interior += 1;
+                        let got = r.get(i, j, k);
+                        assert!(
+                            (got - world_ramp(w)).abs() < 1e-12,
+                            "{dims:?} ({i}, {j}, {k}): {got} vs {}",
+                            world_ramp(w)
+                        );
+                    }
+                }
+            }
+        }
+        assert!(
+            interior > dims[0] * dims[1] * dims[2] / 4,
+            "{dims:?}: {interior}"
+        );
+    }
+    // Same dims: the identity, bit for bit.
+    assert_eq!(
+        resample::resample_trilinear(&v, v.dims).unwrap().data,
+        v.data
+    );
+    // Bit-identical for any thread count.
+    let run = |t: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build()
+            .unwrap()
+            .install(|| resample::resample_trilinear(&v, [23, 11, 7]).unwrap().data)
+    };
+    let one = run(1);
+    assert_eq!(one, run(2));
+    assert_eq!(one, run(5));
+}
+
+#[test]
+fn hu_conversion_then_normalisation_on_a_loaded_file() {
+    use unispine::volume::attenuation::{HuConversion, Normalization};
+    let dir = tempfile::tempdir().unwrap();
+    let mut h = HandNifti::new(4, 16);
+    h.slope = 1.0;
+    h.inter = -1024.0;
+    let raw: Vec<u8> = [
+        0i16, 24, 1024, 1524, 3024, 5000, 100, 200, 300, 400, 500, 600,
+    ]
+    .iter()
+    .cycle()
+    .take(24)
+    .flat_map(|x| x.to_le_bytes())
+    .collect();
+    let p = dir.path().join("hu.nii");
+    write(&p, &h.bytes(&raw));
+    let hu = volume::load(&p).unwrap();
+    // HU -1024, -1000, 0, 500, 2000, 3976.
+    let mut mu = hu.clone();
+    HuConversion::NafMu.apply(&mut mu);
+    let want_mu = [0.0, 0.0004, 0.206, 0.3088, 0.6172, 1.0234656];
+    for (n, w) in want_mu.iter().enumerate() {
+        assert!(
+            (mu.data[n] as f64 - w).abs() < 1e-6,
+            "{n}: {} vs {w}",
+            mu.data[n]
+        );
+    }
+    let mut lc = hu.clone();
+    HuConversion::LinearClip.apply(&mut lc);
+    let want_lc = [0.0, 0.0, 1.0 / 3.0, 0.5, 1.0, 1.0];
+    for (n, w) in want_lc.iter().enumerate() {
+        assert!(
+            (lc.data[n] as f64 - w).abs() < 1e-7,
+            "{n}: {} vs {w}",
+            lc.data[n]
+        );
+    }
+    Normalization::MinMax.apply(&mut lc).unwrap();
+    assert_eq!(lc.data[0], 0.0);
+    assert_eq!(lc.data[4], 1.0);
+    let steps = &lc.provenance.steps;
+    assert!(steps.iter().any(|s| s.contains("scl_slope 1")));
+    assert!(steps[steps.len() - 2].contains("linear-clip"));
+    assert!(steps[steps.len() - 1].contains("min-max"));
+}
+
+#[test]
+fn real_ct_crop_to_vertebrae_contains_every_vertebra_voxel() {
+    let Some((ct, mask)) = real_ct() else { return };
+    let v = volume::load(&ct).unwrap();
+    let l = volume::load_labels(&mask).unwrap();
+    let t = std::time::Instant::now();
+    let c = resample::crop_to_labels(&v, &l, &(25..=50), 10.0).unwrap();
+    eprintln!(
+        "crop to 25..=50 + 10 mm: {:?} voxels in {:.3} s",
+        c.dims,
+        t.elapsed().as_secs_f64()
+    );
+    let b = resample::label_box(&l, &(25..=50), 10.0).unwrap();
+    assert_eq!(c.dims, b.dims());
+    let cl = resample::crop_labels(&l, &b).unwrap();
+    let count = |d: &[u16]| d.iter().filter(|&&x| (25..=50).contains(&x)).count();
+    let all = count(&l.data);
+    assert!(all > 0);
+    assert_eq!(
+        count(&cl.data),
+        all,
+        "every vertebra voxel is inside the crop"
+    );
+    // A 10 mm margin: 15 voxels in x/y (0.703 mm), 4 in z (2.5 mm), unless clamped at the border.
+    let tight = resample::label_box(&l, &(25..=50), 0.0).unwrap();
+    for a in 0..3 {
+        let m = (10.0 / l.spacing[a]).ceil() as usize;
+        assert_eq!(b.lo[a], tight.lo[a].saturating_sub(m));
+        assert_eq!(b.hi[a], (tight.hi[a] + m).min(l.dims[a] - 1));
+    }
+    eprintln!("vertebra box {tight:?}, with margin {b:?}");
+    // Placement kept: the crop's voxel 0 is where the full volume's voxel b.lo was.
+    let p = c.voxel_to_world([0.0; 3]);
+    let q = v.voxel_to_world(b.lo.map(|x| x as f64));
+    for a in 0..3 {
+        assert!((p[a] - q[a]).abs() < 1e-9);
+    }
+    assert_eq!(c.get(0, 0, 0), v.get(b.lo[0], b.lo[1], b.lo[2]));
+}
