@@ -170,7 +170,7 @@ pub fn knn3_mean_sq(p: &[[f64; 3]]) -> Vec<f64> {
             let i = ci * CHUNK + k;
             let c = cell_of(&p[i]);
             let mut best = [f64::INFINITY; 3];
-            let mut visit = |cc: [usize; 3], best: &mut [f64; 3]| {
+            let visit = |cc: [usize; 3], best: &mut [f64; 3]| {
                 let l = lin(cc);
                 for &j in &order[start[l]..start[l + 1]] {
                     if j == i {
