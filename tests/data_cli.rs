@@ -153,7 +153,7 @@ fn fetal_phantom_and_us_proxy() {
         "phantom",
         "--fetal",
         "--size",
-        "32",
+        "48",
         "--out",
         d.to_str().unwrap(),
     ]));
