@@ -441,6 +441,24 @@ fn metaimage_header_errors_name_file_and_field() {
         "CompressedData",
         "truncated",
     );
+    // A header claiming 8e15 bytes: a truncation error, not an allocation failure.
+    let huge = good
+        .replace("DimSize = 4 3 2", "DimSize = 100000 100000 100000")
+        .replace("MET_USHORT", "MET_DOUBLE");
+    case(
+        "huge.mha",
+        huge.clone(),
+        &raw,
+        "ElementDataFile",
+        "truncated",
+    );
+    case(
+        "hugez.mha",
+        huge.replace("CompressedData = False", "CompressedData = True"),
+        &z,
+        "ElementDataFile",
+        "truncated",
+    );
     // Missing separate data file: the I/O error names the data file.
     let p = dir.path().join("missing.mhd");
     write(&p, met_header(t, false, None, "nowhere.raw").as_bytes());
@@ -712,6 +730,9 @@ fn nifti_errors_name_file_and_field() {
     let mut h = HandNifti::new(4, 16);
     h.dim = [4, 4, 3, 2, 5, 1, 1, 1];
     case("4d.nii", h.bytes(&data), "dim[4]", "only 3-D");
+    let mut h = HandNifti::new(64, 64);
+    h.dim = [3, 32000, 32000, 32000, 1, 1, 1, 1];
+    case("huge.nii", h.bytes(&data), "data", "truncated");
     let mut h = HandNifti::new(4, 16);
     h.pixdim[2] = 0.0;
     case("pixdim.nii", h.bytes(&data), "pixdim[2]", "non-zero");
