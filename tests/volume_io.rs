@@ -1205,4 +1205,19 @@ fn real_ct_crop_to_vertebrae_contains_every_vertebra_voxel() {
         assert!((p[a] - q[a]).abs() < 1e-9);
     }
     assert_eq!(c.get(0, 0, 0), v.get(b.lo[0], b.lo[1], b.lo[2]));
+    // The crop holds bone: its 99.5th percentile is bone HU, its 0.5th air or lung.
+    let t = std::time::Instant::now();
+    let p = unispine::volume::attenuation::percentiles(&c, &[0.5, 99.5]).unwrap();
+    eprintln!(
+        "crop p0.5, p99.5 = {p:?} HU in {:.3} s",
+        t.elapsed().as_secs_f64()
+    );
+    assert!(p[0] < -500.0 && p[1] > 300.0, "{p:?}");
+    let t = std::time::Instant::now();
+    let r = resample::resample_trilinear(&c, [128, 128, 128]).unwrap();
+    eprintln!("resample crop to 128^3: {:.3} s", t.elapsed().as_secs_f64());
+    for a in 0..3 {
+        assert!((r.size_mm()[a] - c.size_mm()[a]).abs() < 1e-9);
+    }
+    assert_eq!(r.offset, c.offset);
 }
