@@ -84,12 +84,18 @@ fn tiny(method: Method, iters: usize) -> TrainConfig {
     c.densify.until_iter = iters.saturating_sub(10);
     c.densify.interval = 10;
     c.densify.opacity_reset_interval = 1000;
-    c.densify.grad_threshold = 2e-5;
+    c.densify.grad_threshold = 1e-4;
     c.feature_step_interval = 20;
     c.lr.position_max_steps = iters;
     c.eval_iterations = vec![1];
     c.checkpoint_every = 10;
     c.preview_views = 2;
+    // The paper's learning rates are tuned for 20000 iterations; ten times larger ones let a
+    // few dozen iterations show progress.
+    c.lr.feature *= 10.0;
+    c.lr.opacity *= 10.0;
+    c.lr.scaling *= 10.0;
+    c.lr.rotation *= 10.0;
     c
 }
 
@@ -114,7 +120,7 @@ fn loss_decreases_on_a_tiny_dataset() {
         let last: f64 = losses[72..].iter().sum::<f64>() / 8.0;
         assert!(last < 0.7 * first, "{method:?}: loss {first} -> {last}");
         let (p0, p1) = (m.evals[0].psnr, m.evals.last().unwrap().psnr);
-        assert!(p1 > p0 + 1.0, "{method:?}: test PSNR {p0} -> {p1}");
+        assert!(p1 > p0 + 10.0, "{method:?}: test PSNR {p0} -> {p1}");
         assert!(m.evals.last().unwrap().iteration == 80);
     }
 }
