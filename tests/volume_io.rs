@@ -1128,6 +1128,11 @@ fn trilinear_resampling_reproduces_a_linear_ramp_at_interior_points() {
             "{dims:?}: {interior}"
         );
     }
+    // To about 1.2 mm voxels: extents 10, 12, 12 mm -> 8, 10, 10 voxels.
+    let r = resample::resample_to_spacing(&v, [1.2; 3]).unwrap();
+    assert_eq!(r.dims, [8, 10, 10]);
+    assert_eq!(r.spacing, [1.25, 1.2, 1.2]);
+    assert!(resample::resample_to_spacing(&v, [1.0, 0.0, 1.0]).is_err());
     // Same dims: the identity, bit for bit.
     assert_eq!(
         resample::resample_trilinear(&v, v.dims).unwrap().data,
