@@ -769,7 +769,15 @@ fn default_phantom_and_proxy_are_fast() {
     let tp = t.elapsed().as_secs_f64();
     let us = ultrasound::proxy(&labels, &UsProxySpec::default()).unwrap();
     let tu = t.elapsed().as_secs_f64() - tp;
-    println!("phantom {tp:.3} s, proxy {tu:.3} s");
+    let t2 = std::time::Instant::now();
+    let pv = phantom::generate(&PhantomSpec {
+        supersample: 2,
+        ..PhantomSpec::default()
+    })
+    .unwrap();
+    let tpv = t2.elapsed().as_secs_f64();
+    println!("phantom {tp:.3} s, proxy {tu:.3} s, phantom with supersample 2 {tpv:.3} s");
+    assert!(pv.0.len() == us.len() && tpv < 6.0);
     assert!(us.len() == 128 * 128 * 128);
     assert!(tp < 3.0 && tu < 6.0, "phantom {tp} s, proxy {tu} s");
 }
