@@ -751,6 +751,12 @@ fn specs_round_trip_through_json_with_defaults() {
     let s: UsProxySpec = serde_json::from_str(r#"{"seed": 4, "beam": "+z"}"#).unwrap();
     assert_eq!(s.seed, 4);
     assert_eq!(s.beam, ultrasound::BeamDir::ZPos);
+    // A spec written before `supersample` existed still loads (default 1).
+    let old: PhantomSpec = serde_json::from_str(
+        r#"{"seed": 2, "dims": [8, 8, 8], "spacing": [1, 1, 1], "fetal": false}"#,
+    )
+    .unwrap();
+    assert_eq!(old.supersample, 1);
     let p = PhantomSpec::fetal_default();
     let back: PhantomSpec = serde_json::from_str(&serde_json::to_string(&p).unwrap()).unwrap();
     assert_eq!(back, p);
