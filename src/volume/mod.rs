@@ -365,10 +365,11 @@ fn read_npy(path: &std::path::Path) -> crate::error::Result<Volume<f32>> {
         crate::error::Error::format(path, field, e.to_string())
     };
     // Try each supported dtype in turn; only a dtype mismatch moves on to the next.
+    type Attempt = Result<Option<(Vec<f32>, [usize; 3])>, ReadNpyError>;
     fn attempt<T: ndarray_npy::ReadableElement + Copy>(
         bytes: &[u8],
         conv: fn(T) -> f32,
-    ) -> Result<Option<(Vec<f32>, [usize; 3])>, ReadNpyError> {
+    ) -> Attempt {
         match Array3::<T>::read_npy(std::io::Cursor::new(bytes)) {
             Ok(a) => {
                 let (nx, ny, nz) = a.dim();
@@ -381,10 +382,8 @@ fn read_npy(path: &std::path::Path) -> crate::error::Result<Volume<f32>> {
             Err(e) => Err(e),
         }
     }
-    let tries: [(
-        &str,
-        fn(&[u8]) -> Result<Option<(Vec<f32>, [usize; 3])>, ReadNpyError>,
-    ); 4] = [
+    type Try = fn(&[u8]) -> Attempt;
+    let tries: [(&str, Try); 4] = [
         ("float32", |b| attempt::<f32>(b, |v| v)),
         ("float64", |b| attempt::<f64>(b, |v| v as f32)),
         ("uint8", |b| attempt::<u8>(b, |v| v as f32)),

@@ -60,7 +60,14 @@ fn file_bytes(path: &Path) -> Result<Vec<u8>> {
     if !gz {
         return Ok(raw);
     }
-    let mut out = Vec::new();
+    // The gzip footer holds the uncompressed size mod 2^32: a capacity hint only, bounded by
+    // deflate's largest ratio (about 1032:1).
+    let hint = raw
+        .len()
+        .checked_sub(4)
+        .map(|n| u32::from_le_bytes([raw[n], raw[n + 1], raw[n + 2], raw[n + 3]]) as usize)
+        .unwrap_or(0);
+    let mut out = Vec::with_capacity(hint.min(raw.len().saturating_mul(1032)));
     flate2::read::MultiGzDecoder::new(&raw[..])
         .read_to_end(&mut out)
         .map_err(|e| {
@@ -352,7 +359,7 @@ pub fn read(path: &Path) -> Result<Volume<f32>> {
 
     let (unit, unit_name) = mm_per_unit(h.xyzt_units);
     let mut spacing = [0.0; 3];
-    for a in 0..3 {
+    for (a, s) in spacing.iter_mut().enumerate() {
         let p = h.pixdim[a + 1] as f64;
         if !(p.is_finite() && p != 0.0) {
             return Err(Error::format(
@@ -361,7 +368,7 @@ pub fn read(path: &Path) -> Result<Volume<f32>> {
                 format!("voxel size {p} must be finite and non-zero"),
             ));
         }
-        spacing[a] = p.abs() * unit;
+        *s = p.abs() * unit;
     }
 
     let off = h.vox_offset;
