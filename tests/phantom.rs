@@ -52,7 +52,6 @@ fn same_seed_same_bits_other_seed_differs() {
             dims: [64, 64, 80],
             spacing: if fetal { [0.5; 3] } else { [1.5; 3] },
             fetal,
-            supersample: 1,
         };
         let (a, la) = phantom::generate(&spec).unwrap();
         let (b, lb) = phantom::generate(&spec).unwrap();
@@ -77,8 +76,6 @@ fn phantom_and_proxy_are_bit_identical_for_1_2_8_threads() {
             dims: [72, 64, 96],
             spacing: if fetal { [0.5; 3] } else { [1.4; 3] },
             fetal,
-            // The adult run also covers the partial-volume pass.
-            supersample: if fetal { 1 } else { 2 },
         };
         let us_spec = UsProxySpec {
             seed: 5,
@@ -91,7 +88,8 @@ fn phantom_and_proxy_are_bit_identical_for_1_2_8_threads() {
                 .build()
                 .unwrap();
             outs.push(pool.install(|| {
-                let p = phantom::generate_detailed(&spec).unwrap();
+                // The adult run also covers the partial-volume pass.
+                let p = phantom::generate_partial_volume(&spec, if fetal { 1 } else { 2 }).unwrap();
                 // The proxy along each of the three axes (three code paths of the scan).
                 let us: Vec<Vec<u32>> = [
                     ultrasound::BeamDir::YNeg,
@@ -676,11 +674,8 @@ fn bad_specs_give_errors_naming_the_field() {
     };
     assert!(err(phantom::generate(&s)).contains("`dims`"));
     for ss in [0, 9] {
-        let s = PhantomSpec {
-            supersample: ss,
-            ..PhantomSpec::default()
-        };
-        assert!(err(phantom::generate(&s)).contains("`supersample`"));
+        let e = phantom::generate_partial_volume(&PhantomSpec::default(), ss).unwrap_err();
+        assert!(e.to_string().contains("`supersample`"), "{e}");
     }
 
     let labels = &adult().labels;
@@ -751,12 +746,6 @@ fn specs_round_trip_through_json_with_defaults() {
     let s: UsProxySpec = serde_json::from_str(r#"{"seed": 4, "beam": "+z"}"#).unwrap();
     assert_eq!(s.seed, 4);
     assert_eq!(s.beam, ultrasound::BeamDir::ZPos);
-    // A spec written before `supersample` existed still loads (default 1).
-    let old: PhantomSpec = serde_json::from_str(
-        r#"{"seed": 2, "dims": [8, 8, 8], "spacing": [1, 1, 1], "fetal": false}"#,
-    )
-    .unwrap();
-    assert_eq!(old.supersample, 1);
     let p = PhantomSpec::fetal_default();
     let back: PhantomSpec = serde_json::from_str(&serde_json::to_string(&p).unwrap()).unwrap();
     assert_eq!(back, p);
@@ -776,14 +765,10 @@ fn default_phantom_and_proxy_are_fast() {
     let us = ultrasound::proxy(&labels, &UsProxySpec::default()).unwrap();
     let tu = t.elapsed().as_secs_f64() - tp;
     let t2 = std::time::Instant::now();
-    let pv = phantom::generate(&PhantomSpec {
-        supersample: 2,
-        ..PhantomSpec::default()
-    })
-    .unwrap();
+    let pv = phantom::generate_partial_volume(&PhantomSpec::default(), 2).unwrap();
     let tpv = t2.elapsed().as_secs_f64();
     println!("phantom {tp:.3} s, proxy {tu:.3} s, phantom with supersample 2 {tpv:.3} s");
-    assert!(pv.0.len() == us.len() && tpv < 6.0);
+    assert!(pv.mu.len() == us.len() && tpv < 6.0);
     assert!(us.len() == 128 * 128 * 128);
     assert!(tp < 3.0 && tu < 6.0, "phantom {tp} s, proxy {tu} s");
 }
@@ -842,11 +827,7 @@ fn proxy_speckle_has_unit_mean_on_uniform_tissue() {
 #[test]
 fn partial_volume_mixes_only_boundary_voxels() {
     let crisp = adult();
-    let spec = PhantomSpec {
-        supersample: 3,
-        ..PhantomSpec::default()
-    };
-    let pv = phantom::generate_detailed(&spec).unwrap();
+    let pv = phantom::generate_partial_volume(&PhantomSpec::default(), 3).unwrap();
     assert_eq!(pv.labels.data, crisp.labels.data);
     assert_eq!(pv.tissue, crisp.tissue);
     let [nx, ny, nz] = crisp.mu.dims;

@@ -156,15 +156,6 @@ pub struct PhantomSpec {
     pub spacing: [f64; 3],
     /// Fetal variant (small scale, ossification centres, fluid).
     pub fetal: bool,
-    /// Partial-volume sampling: voxels on a tissue boundary (a 6-neighbour of another tissue)
-    /// take the mean attenuation of `supersample`^3 sub-voxel samples; 1 (default) keeps every
-    /// voxel at the tissue of its centre. The label map always follows the voxel centre.
-    #[serde(default = "one")]
-    pub supersample: usize,
-}
-
-fn one() -> usize {
-    1
 }
 
 impl Default for PhantomSpec {
@@ -174,7 +165,6 @@ impl Default for PhantomSpec {
             dims: [128, 128, 128],
             spacing: [1.0, 1.0, 1.0],
             fetal: false,
-            supersample: 1,
         }
     }
 }
@@ -187,7 +177,6 @@ impl PhantomSpec {
             dims: [128, 128, 128],
             spacing: [0.4, 0.4, 0.4],
             fetal: true,
-            supersample: 1,
         }
     }
 
@@ -207,15 +196,6 @@ impl PhantomSpec {
                     format!("voxel size must be finite and > 0 mm, got {d}"),
                 ));
             }
-        }
-        if !(1..=MAX_SUPERSAMPLE).contains(&self.supersample) {
-            return Err(Error::invalid(
-                "supersample",
-                format!(
-                    "must be 1 (off) to {MAX_SUPERSAMPLE}, got {}",
-                    self.supersample
-                ),
-            ));
         }
         let n = self
             .dims
@@ -284,6 +264,7 @@ pub struct Phantom {
 fn partial_volume(
     layout: &anatomy::Layout,
     spec: &PhantomSpec,
+    ss: usize,
     tis: &[u8],
     mu: &mut [f32],
     xs: &[f64],
@@ -291,7 +272,6 @@ fn partial_volume(
 ) {
     let [nx, ny, nz] = spec.dims;
     let d = spec.spacing;
-    let ss = spec.supersample;
     let nxy = nx * ny;
     let off: Vec<f64> = (0..ss)
         .map(|a| (a as f64 + 0.5) / ss as f64 - 0.5)
@@ -345,9 +325,24 @@ pub fn generate(spec: &PhantomSpec) -> Result<(Volume<f32>, LabelMap)> {
     Ok((p.mu, p.labels))
 }
 
-/// Generate the phantom with its tissue map and vertebra list.
+/// Generate the phantom with its tissue map and vertebra list (voxels take the tissue at their
+/// centre).
 pub fn generate_detailed(spec: &PhantomSpec) -> Result<Phantom> {
+    generate_partial_volume(spec, 1)
+}
+
+/// Generate the phantom with partial-volume sampling: voxels on a tissue boundary (a
+/// 6-neighbour has another tissue) take the mean attenuation of `supersample`^3 sub-voxel
+/// samples; `supersample` = 1 is [`generate_detailed`]. The label map and the tissue map
+/// always follow the voxel centre. Error naming `supersample` outside 1..=8.
+pub fn generate_partial_volume(spec: &PhantomSpec, supersample: usize) -> Result<Phantom> {
     spec.validate()?;
+    if !(1..=MAX_SUPERSAMPLE).contains(&supersample) {
+        return Err(Error::invalid(
+            "supersample",
+            format!("must be 1 (off) to {MAX_SUPERSAMPLE}, got {supersample}"),
+        ));
+    }
     let [nx, ny, nz] = spec.dims;
     let d = spec.spacing;
     let size = [nx as f64 * d[0], ny as f64 * d[1], nz as f64 * d[2]];
@@ -391,8 +386,8 @@ pub fn generate_detailed(spec: &PhantomSpec) -> Result<Phantom> {
                 }
             }
         });
-    if spec.supersample > 1 {
-        partial_volume(&layout, spec, &tis, &mut mu, &xs, &ys);
+    if supersample > 1 {
+        partial_volume(&layout, spec, supersample, &tis, &mut mu, &xs, &ys);
     }
     let vertebrae: Vec<VertebraInfo> = layout
         .verts
@@ -431,7 +426,7 @@ pub fn generate_detailed(spec: &PhantomSpec) -> Result<Phantom> {
             spec.spacing,
             layout.s,
             ids_str,
-            spec.supersample
+            supersample
         )],
     };
     Ok(Phantom {
