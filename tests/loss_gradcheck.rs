@@ -413,6 +413,11 @@ fn timing_at_256() {
     time("l1 f32 256x256", &mut || {
         std::hint::black_box(l1(&r32, &gt32));
     });
+    time("det_sum_by |e| f32 256x256", &mut || {
+        std::hint::black_box(unispine::par::det_sum_by(r32.data.len(), |p| {
+            (r32.data[p] as f64 - gt32.data[p] as f64).abs()
+        }));
+    });
     time("ssim f32 256x256", &mut || {
         std::hint::black_box(ssim(&r32, &gt32));
     });
