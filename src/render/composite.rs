@@ -1,41 +1,461 @@
-//! Eqs. (4)-(5): splats to an image (interface; not written yet).
+//! Eqs. (4)-(5): splats to an image by front-to-back alpha compositing over 16x16 tiles, and the
+//! exact vector-Jacobian product of that image.
+//!
+//! Forward, per pixel p with centre (col + 0.5, row + 0.5) (the convention of `mean2d`), over
+//! the splats of p's tile in (depth, index) order ([`super::tiles`]):
+//! - d = p - mean2d, power = -0.5 (A dx^2 + C dy^2) - B dx dy (conic (A, B, C)); skip if
+//!   power > 0 (3DGS);
+//! - Eq. (4): alpha = min(0.99, o exp(power)); skip if alpha < 1/255;
+//! - exclusive stop (3DGS): if T (1 - alpha) < 1e-4 the pixel is done and this splat is NOT
+//!   blended;
+//! - Eq. (5): C += c alpha T, T <- T (1 - alpha); the output is C + T_final * background.
+//!
+//! Saved for the backward pass (as 3DGS): the final T and the number of entries of the tile's
+//! work list up to and including the last blended one (`n_contrib`), per pixel.
+//!
+//! Backward, per pixel back to front from the last blended entry, T recovered by division
+//! T_k = T_{k+1} / (1 - alpha_k) (alpha <= 0.99, so no blow-up), S_k = sum_{j>k} c_j alpha_j T_j:
+//! - dL/dc_k = g alpha_k T_k;
+//! - dL/dalpha_k = g (c_k T_k - S_k / (1 - alpha_k)) - g bg T_final / (1 - alpha_k);
+//! - where o G > 0.99 the clamp is active and d alpha / d(o G) = 0 (3DGS passes the gradient
+//!   through; gsplat and brush zero it as we do); else dL/do = G dL/dalpha, dL/dpower =
+//!   o G dL/dalpha, dL/dmean = dL/dpower (A dx + B dy, B dx + C dy), dL/dA = -dx^2/2 dL/dpower,
+//!   dL/dB = -dx dy dL/dpower (B is the single off-diagonal parameter), dL/dC = -dy^2/2 dL/dpower.
+//!   The hard cutoffs (power > 0, alpha < 1/255, the T stop, the tile box) are not
+//!   differentiated: they are the same in both passes.
+//!
+//! Work limits that do not change any bit of the result: for each (tile, splat) the pixels
+//! evaluated are restricted to the bounding box of the ellipse o G >= (1/255) e^-0.001 widened
+//! by one pixel (outside it alpha < 1/255, so those pixels would be skipped anyway); splats with
+//! o < (1/255) e^-0.001 are dropped; a tile stops when all its pixels are done.
+//!
+//! Parallelism: rayon over tiles. Each tile is computed by one task in a fixed order; the
+//! per-tile gradient records (one per list entry) are reduced sequentially in tile order, so
+//! image and gradients are bit-identical for any thread count. No atomics.
 
-use std::marker::PhantomData;
+use rayon::prelude::*;
 
+use super::tiles::{self, TileBins, TILE};
 use super::{SplatGrads, Splats};
 use crate::image2d::Image2d;
 use crate::real::Real;
 
+/// Eq. (4) opacity clamp (3DGS; gsplat since 2026).
+pub const ALPHA_MAX: f64 = 0.99;
+/// Splats with alpha below this are skipped at a pixel.
+pub const ALPHA_MIN: f64 = 1.0 / 255.0;
+/// Exclusive transmittance stop.
+pub const T_MIN: f64 = 1e-4;
+/// Safety margin (in log space) of the per-splat pixel box.
+const BOX_LOG_MARGIN: f64 = 1e-3;
+
+/// Pixels per tile.
+const TP: usize = TILE * TILE;
+
 /// What [`backward`] needs from [`forward`].
 #[derive(Clone, Debug, Default)]
 pub struct CompositeSaved<R: Real> {
-    _p: PhantomData<R>,
+    /// The tile lists (depth-sorted Gaussian indices).
+    pub bins: TileBins,
+    /// Background value of the forward pass.
+    pub background: R,
+    /// Final transmittance per pixel (row-major).
+    pub final_t: Vec<R>,
+    /// Per pixel: 1 + position of the last blended entry in its tile's work list (0 = none).
+    pub n_contrib: Vec<u32>,
 }
 
-/// Composite `splats` into a `width` x `height` image over `background`.
+/// One (tile, splat) pair with the splat's fields and its pixel box inside the tile.
+#[derive(Clone, Copy, Debug)]
+struct Entry<R> {
+    id: u32,
+    mx: R,
+    my: R,
+    a: R,
+    b: R,
+    c: R,
+    o: R,
+    col: R,
+    /// Pixel box [x0, x1) x [y0, y1), image coordinates.
+    x0: u32,
+    x1: u32,
+    y0: u32,
+    y1: u32,
+}
+
+/// The work list of tile `t`: its splats in depth order, each with the box of pixels where it
+/// can reach alpha >= 1/255. Entries that reach no pixel of the tile are dropped. Forward and
+/// backward build the same list.
+fn tile_entries<R: Real>(s: &Splats<R>, bins: &TileBins, t: usize) -> Vec<Entry<R>> {
+    let [rx0, rx1, ry0, ry1] = bins.pixel_rect(t).map(|x| x as f64);
+    let list = bins.list(t);
+    let mut out = Vec::with_capacity(list.len());
+    for &id in list {
+        let i = id as usize;
+        let o = s.opacity[i].f64();
+        // alpha <= o G <= o: nothing to draw unless o >= 1/255 (up to the margin).
+        let l = (255.0 * o).ln() + BOX_LOG_MARGIN;
+        if !(l > 0.0) {
+            continue;
+        }
+        let [a, b, c] = s.conic[i].map(|x| x.f64());
+        let [mx, my] = s.mean2d[i].map(|x| x.f64());
+        // {d : d^T Q d <= 2 l} has half-widths sqrt(2 l (Q^-1)_00), sqrt(2 l (Q^-1)_11).
+        let det = a * c - b * b;
+        let (hx, hy) = if det > 0.0 && det.is_finite() {
+            ((2.0 * l * c / det).sqrt(), (2.0 * l * a / det).sqrt())
+        } else {
+            (f64::INFINITY, f64::INFINITY)
+        };
+        // Pixel centres col + 0.5 within [mx - hx - 1, mx + hx + 1].
+        let x0 = (mx - hx - 1.5).ceil().max(rx0);
+        let x1 = ((mx + hx + 0.5).floor() + 1.0).min(rx1);
+        let y0 = (my - hy - 1.5).ceil().max(ry0);
+        let y1 = ((my + hy + 0.5).floor() + 1.0).min(ry1);
+        if !(x0 < x1 && y0 < y1) {
+            continue;
+        }
+        out.push(Entry {
+            id,
+            mx: s.mean2d[i][0],
+            my: s.mean2d[i][1],
+            a: s.conic[i][0],
+            b: s.conic[i][1],
+            c: s.conic[i][2],
+            o: s.opacity[i],
+            col: s.color[i],
+            x0: x0 as u32,
+            x1: x1 as u32,
+            y0: y0 as u32,
+            y1: y1 as u32,
+        });
+    }
+    out
+}
+
+/// (dx, dy, power) of entry `e` at the pixel centre (px, py). Forward and backward call this
+/// same function, so their skip decisions agree bit for bit.
+#[inline(always)]
+fn power<R: Real>(e: &Entry<R>, px: R, py: R) -> (R, R, R) {
+    let dx = px - e.mx;
+    let dy = py - e.my;
+    let half = R::c(0.5);
+    (
+        dx,
+        dy,
+        -half * (e.a * dx * dx + e.c * dy * dy) - e.b * dx * dy,
+    )
+}
+
+/// Per-tile forward result: colour (without background), final T, n_contrib, tile-local.
+struct TileOut<R> {
+    color: [R; TP],
+    t: [R; TP],
+    last: [u32; TP],
+}
+
+fn forward_tile<R: Real>(s: &Splats<R>, bins: &TileBins, t: usize) -> TileOut<R> {
+    let [x0, x1, y0, y1] = bins.pixel_rect(t);
+    let npix = (x1 - x0) * (y1 - y0);
+    let mut out = TileOut {
+        color: [R::zero(); TP],
+        t: [R::one(); TP],
+        last: [0u32; TP],
+    };
+    let mut done = [false; TP];
+    let mut n_done = 0usize;
+    let (amax, amin, tmin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN), R::c(T_MIN));
+    let one = R::one();
+    let half = R::c(0.5);
+    let entries = tile_entries(s, bins, t);
+    for (j, e) in entries.iter().enumerate() {
+        if n_done == npix {
+            break;
+        }
+        for row in e.y0 as usize..e.y1 as usize {
+            let py = R::c(row as f64) + half;
+            let base = (row - y0) * TILE - x0;
+            for col in e.x0 as usize..e.x1 as usize {
+                let p = base + col;
+                if done[p] {
+                    continue;
+                }
+                let (_, _, pw) = power(e, R::c(col as f64) + half, py);
+                if pw > R::zero() {
+                    continue;
+                }
+                let og = e.o * pw.exp();
+                let alpha = if og > amax { amax } else { og };
+                if alpha < amin {
+                    continue;
+                }
+                let tt = out.t[p];
+                let next = tt * (one - alpha);
+                if next < tmin {
+                    done[p] = true;
+                    n_done += 1;
+                    continue;
+                }
+                out.color[p] += e.col * alpha * tt;
+                out.t[p] = next;
+                out.last[p] = j as u32 + 1;
+            }
+        }
+    }
+    out
+}
+
+/// Composite `splats` into a `width` x `height` image over `background` (Eqs. 4-5).
+///
+/// Splats with radius 0 or any non-finite screen-space field are not drawn (see
+/// [`tiles::drawn`]; [`validate`] reports the latter as an error).
 pub fn forward<R: Real>(
-    _splats: &Splats<R>,
+    splats: &Splats<R>,
     width: usize,
     height: usize,
     background: R,
 ) -> (Image2d<R>, CompositeSaved<R>) {
+    let bins = tiles::bin(splats, width, height);
+    let outs: Vec<TileOut<R>> = (0..bins.n_tiles())
+        .into_par_iter()
+        .map(|t| forward_tile(splats, &bins, t))
+        .collect();
+    let mut img = Image2d::filled(width, height, R::zero());
+    let mut final_t = vec![R::one(); width * height];
+    let mut n_contrib = vec![0u32; width * height];
+    for (t, o) in outs.iter().enumerate() {
+        let [x0, x1, y0, y1] = bins.pixel_rect(t);
+        for row in y0..y1 {
+            for col in x0..x1 {
+                let p = (row - y0) * TILE + col - x0;
+                let q = row * width + col;
+                img.data[q] = o.color[p] + o.t[p] * background;
+                final_t[q] = o.t[p];
+                n_contrib[q] = o.last[p];
+            }
+        }
+    }
     (
-        Image2d::filled(width, height, background),
-        CompositeSaved { _p: PhantomData },
+        img,
+        CompositeSaved {
+            bins,
+            background,
+            final_t,
+            n_contrib,
+        },
     )
 }
 
-/// Vector-Jacobian product of [`forward`].
+/// Error if a drawn splat (radius > 0) has a non-finite field, naming the splat and the field.
+/// [`forward`] skips such splats; callers that want an error call this first.
+pub fn validate<R: Real>(splats: &Splats<R>) -> crate::error::Result<()> {
+    for i in 0..splats.radius.len() {
+        if splats.radius[i] == 0 {
+            continue;
+        }
+        let fields: [(&str, &[R]); 5] = [
+            ("mean2d", &splats.mean2d[i]),
+            ("conic", &splats.conic[i]),
+            ("opacity", std::slice::from_ref(&splats.opacity[i])),
+            ("color", std::slice::from_ref(&splats.color[i])),
+            ("depth", std::slice::from_ref(&splats.depth[i])),
+        ];
+        for (name, v) in fields {
+            if let Some(x) = v.iter().find(|x| !x.is_finite()) {
+                return Err(crate::error::Error::NonFinite {
+                    what: format!("splat {i} `{name}`"),
+                    index: i,
+                    value: x.f64(),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Gradient record of one work-list entry: (mean x, mean y, A, B, C, opacity, colour).
+type Rec<R> = (u32, [R; 7]);
+
+fn backward_tile<R: Real>(
+    s: &Splats<R>,
+    saved: &CompositeSaved<R>,
+    d_image: &Image2d<R>,
+    t: usize,
+) -> Vec<Rec<R>> {
+    let bins = &saved.bins;
+    let width = bins.width;
+    let [x0, x1, y0, y1] = bins.pixel_rect(t);
+    let mut tcur = [R::zero(); TP];
+    let mut tfin = [R::zero(); TP];
+    let mut behind = [R::zero(); TP];
+    let mut g = [R::zero(); TP];
+    let mut last = [0u32; TP];
+    let mut max_last = 0u32;
+    for row in y0..y1 {
+        for col in x0..x1 {
+            let p = (row - y0) * TILE + col - x0;
+            let q = row * width + col;
+            tcur[p] = saved.final_t[q];
+            tfin[p] = saved.final_t[q];
+            g[p] = d_image.data[q];
+            last[p] = saved.n_contrib[q];
+            max_last = max_last.max(last[p]);
+        }
+    }
+    if max_last == 0 {
+        return Vec::new();
+    }
+    let entries = tile_entries(s, bins, t);
+    let (amax, amin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN));
+    let one = R::one();
+    let half = R::c(0.5);
+    let bg = saved.background;
+    let mut recs = Vec::with_capacity(max_last as usize);
+    for j in (0..max_last as usize).rev() {
+        let e = &entries[j];
+        let mut acc = [R::zero(); 7];
+        let mut any = false;
+        for row in e.y0 as usize..e.y1 as usize {
+            let py = R::c(row as f64) + half;
+            let base = (row - y0) * TILE - x0;
+            for col in e.x0 as usize..e.x1 as usize {
+                let p = base + col;
+                if j as u32 >= last[p] {
+                    continue;
+                }
+                let (dx, dy, pw) = power(e, R::c(col as f64) + half, py);
+                if pw > R::zero() {
+                    continue;
+                }
+                let gk = pw.exp();
+                let og = e.o * gk;
+                let alpha = if og > amax { amax } else { og };
+                if alpha < amin {
+                    continue;
+                }
+                any = true;
+                let om = one - alpha;
+                let tk = tcur[p] / om;
+                let gp = g[p];
+                acc[6] += gp * alpha * tk;
+                let d_alpha = gp * (e.col * tk - behind[p] / om) - gp * bg * tfin[p] / om;
+                behind[p] += e.col * alpha * tk;
+                tcur[p] = tk;
+                if og <= amax {
+                    acc[5] += gk * d_alpha;
+                    let d_pw = og * d_alpha;
+                    acc[0] += d_pw * (e.a * dx + e.b * dy);
+                    acc[1] += d_pw * (e.b * dx + e.c * dy);
+                    acc[2] -= half * dx * dx * d_pw;
+                    acc[3] -= dx * dy * d_pw;
+                    acc[4] -= half * dy * dy * d_pw;
+                }
+            }
+        }
+        if any {
+            recs.push((e.id, acc));
+        }
+    }
+    recs
+}
+
+/// Vector-Jacobian product of [`forward`]: the gradient of sum(d_image * image) with respect
+/// to the splat fields (mean2d in pixels, conic (A, B, C) with B the single off-diagonal
+/// parameter, opacity after the sigmoid, colour). Splats that are not drawn get 0.
 pub fn backward<R: Real>(
     splats: &Splats<R>,
-    _saved: &CompositeSaved<R>,
-    _d_image: &Image2d<R>,
+    saved: &CompositeSaved<R>,
+    d_image: &Image2d<R>,
 ) -> SplatGrads<R> {
     let n = splats.mean2d.len();
-    SplatGrads {
+    assert_eq!(
+        (d_image.width, d_image.height),
+        (saved.bins.width, saved.bins.height),
+        "d_image has the size of the rendered image"
+    );
+    let recs: Vec<Vec<Rec<R>>> = (0..saved.bins.n_tiles())
+        .into_par_iter()
+        .map(|t| backward_tile(splats, saved, d_image, t))
+        .collect();
+    let mut out = SplatGrads {
         mean2d: vec![[R::zero(); 2]; n],
         conic: vec![[R::zero(); 3]; n],
         opacity: vec![R::zero(); n],
         color: vec![R::zero(); n],
+    };
+    // Sequential reduction in tile order (and, within a tile, back-to-front entry order).
+    for tile in &recs {
+        for (id, a) in tile {
+            let i = *id as usize;
+            out.mean2d[i][0] += a[0];
+            out.mean2d[i][1] += a[1];
+            out.conic[i][0] += a[2];
+            out.conic[i][1] += a[3];
+            out.conic[i][2] += a[4];
+            out.opacity[i] += a[5];
+            out.color[i] += a[6];
+        }
     }
+    out
 }
+
+/// Naive reference of [`forward`] (no tile lists, no pixel boxes, no early tile exit): for every
+/// pixel, every drawn splat whose tile rectangle holds the pixel's tile, in (depth, index)
+/// order. Same arithmetic per pixel, so it agrees with [`forward`] bit for bit; used by the tests
+/// and as the per-blend baseline of `unispine bench render`. Single-threaded, O(pixels x splats).
+pub fn naive_forward<R: Real>(
+    splats: &Splats<R>,
+    width: usize,
+    height: usize,
+    background: R,
+) -> Image2d<R> {
+    let n = splats.radius.len();
+    let (tx, ty) = (width.div_ceil(TILE), height.div_ceil(TILE));
+    let mut order: Vec<(u64, u32, [usize; 4])> = (0..n)
+        .filter(|&i| tiles::drawn(splats, i))
+        .filter_map(|i| {
+            let [u, v] = splats.mean2d[i].map(|x| x.f64());
+            tiles::tile_rect(u, v, splats.radius[i], tx, ty)
+                .map(|r| (tiles::depth_key(splats.depth[i].f64()), i as u32, r))
+        })
+        .collect();
+    order.sort_unstable();
+    let (amax, amin, tmin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN), R::c(T_MIN));
+    let half = R::c(0.5);
+    let mut img = Image2d::filled(width, height, R::zero());
+    for row in 0..height {
+        for col in 0..width {
+            let (ptx, pty) = (col / TILE, row / TILE);
+            let (mut c, mut t) = (R::zero(), R::one());
+            for &(_, i, r) in &order {
+                if !(r[0] <= ptx && ptx < r[1] && r[2] <= pty && pty < r[3]) {
+                    continue;
+                }
+                let i = i as usize;
+                let dx = R::c(col as f64) + half - splats.mean2d[i][0];
+                let dy = R::c(row as f64) + half - splats.mean2d[i][1];
+                let [a, b, cc] = splats.conic[i];
+                let pw = -half * (a * dx * dx + cc * dy * dy) - b * dx * dy;
+                if pw > R::zero() {
+                    continue;
+                }
+                let og = splats.opacity[i] * pw.exp();
+                let alpha = if og > amax { amax } else { og };
+                if alpha < amin {
+                    continue;
+                }
+                let next = t * (R::one() - alpha);
+                if next < tmin {
+                    break;
+                }
+                c += splats.color[i] * alpha * t;
+                t = next;
+            }
+            img.data[row * width + col] = c + t * background;
+        }
+    }
+    img
+}
+
+#[cfg(test)]
+mod tests;
