@@ -258,6 +258,10 @@ fn vertebra_ids_25_50_are_present_and_crop_to_the_spine() {
     // Cropping to ids 25-50 keeps the spine and drops most of the torso in x and y.
     assert!(hi[0] - lo[0] < nx * 9 / 10 && hi[1] - lo[1] < ny * 9 / 10);
     assert!(lo[0] > 0 && lo[1] > 0 && hi[0] < nx - 1 && hi[1] < ny - 1);
+    // The crate's crop to label ids 25-50 (as for the real CT) gives exactly that box.
+    let cropped =
+        unispine::volume::resample::crop_to_labels(&p.mu, &p.labels, &(25u16..=50), 0.0).unwrap();
+    assert_eq!(cropped.dims, [0, 1, 2].map(|a| hi[a] - lo[a] + 1));
 }
 
 #[test]

