@@ -66,8 +66,14 @@ fn img(v: &[f64]) -> Image2d<f64> {
     Image2d::from_vec(W, H, v.to_vec())
 }
 
-fn check(name: &str, analytic: &[f64], f: impl FnMut(&[f64]) -> f64, x: &[f64], h: f64) {
-    let num = central_diff5(f, x, h);
+fn check(name: &str, analytic: &[f64], f: impl FnMut(&[f64]) -> f64 + Send, x: &[f64], h: f64) {
+    // Thousands of tiny evaluations: one thread avoids the cross-thread wake-ups (the values
+    // do not depend on the thread count, see `loss_and_gradient_are_thread_count_invariant`).
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let num = pool.install(|| central_diff5(f, x, h));
     let err = rel_err_maxabs(analytic, &num);
     println!("{name}: max-abs-normalised error {err:.3e}");
     assert!(err <= TOL, "{name}: error {err:e} > {TOL:e}");
@@ -412,6 +418,11 @@ fn timing_at_256() {
     });
     time("l1 f32 256x256", &mut || {
         std::hint::black_box(l1(&r32, &gt32));
+    });
+    time("det_sum_by |e| f32 256x256", &mut || {
+        std::hint::black_box(unispine::par::det_sum_by(r32.data.len(), |p| {
+            (r32.data[p] as f64 - gt32.data[p] as f64).abs()
+        }));
     });
     time("ssim f32 256x256", &mut || {
         std::hint::black_box(ssim(&r32, &gt32));

@@ -506,6 +506,17 @@ fn npy_round_trip_x_y_z_in_each_dtype() {
     f.assign(&a.mapv(|x| x as f32));
     ndarray_npy::write_npy(&p, &f).unwrap();
     check(&p);
+    // Truncated data and a file that is not .npy name the file and the field.
+    let p = dir.path().join("cut.npy");
+    ndarray_npy::write_npy(&p, &a.mapv(|x| x as f32)).unwrap();
+    let b = std::fs::read(&p).unwrap();
+    write(&p, &b[..b.len() - 6]);
+    let e = err_text(volume::load(&p).unwrap_err());
+    assert!(e.contains("cut.npy") && e.contains("`data`"), "{e}");
+    let p = dir.path().join("text.npy");
+    write(&p, b"this is not a numpy file at all, just some words");
+    let e = err_text(volume::load(&p).unwrap_err());
+    assert!(e.contains("text.npy") && e.contains("`header`"), "{e}");
     // Unsupported dtype and wrong rank name the file and the field.
     let p = dir.path().join("i32.npy");
     ndarray_npy::write_npy(&p, &a.mapv(|x| x as i32)).unwrap();
@@ -1128,6 +1139,11 @@ fn trilinear_resampling_reproduces_a_linear_ramp_at_interior_points() {
             "{dims:?}: {interior}"
         );
     }
+    // To about 1.2 mm voxels: extents 10, 12, 12 mm -> 8, 10, 10 voxels.
+    let r = resample::resample_to_spacing(&v, [1.2; 3]).unwrap();
+    assert_eq!(r.dims, [8, 10, 10]);
+    assert_eq!(r.spacing, [1.25, 1.2, 1.2]);
+    assert!(resample::resample_to_spacing(&v, [1.0, 0.0, 1.0]).is_err());
     // Same dims: the identity, bit for bit.
     assert_eq!(
         resample::resample_trilinear(&v, v.dims).unwrap().data,
