@@ -21,11 +21,16 @@ fn manifest() -> PathBuf {
 }
 
 fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_unispine"))
-        .arg("data")
-        .args(args)
-        .output()
-        .expect("run unispine")
+    run_threads(args, None)
+}
+
+fn run_threads(args: &[&str], threads: Option<usize>) -> Output {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_unispine"));
+    c.arg("data").args(args);
+    if let Some(t) = threads {
+        c.env("RAYON_NUM_THREADS", t.to_string());
+    }
+    c.output().expect("run unispine")
 }
 
 fn ok(args: &[&str]) -> String {
@@ -108,6 +113,25 @@ fn phantom_dataset_and_its_determinism() {
             "{f} differs between two runs with the same seed"
         );
     }
+    // The same bits with 1 and 3 threads (noise included).
+    let mut files = Vec::new();
+    for t in [1usize, 3] {
+        let d = tmp.path().join(format!("t{t}"));
+        let args = with_small(
+            &[
+                &base[..],
+                &["--noise", "poisson:1e5,10", "--out", d.to_str().unwrap()],
+            ]
+            .concat(),
+        );
+        let o = run_threads(&args, Some(t));
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        files.push(["train.npy", "test.npy"].map(|f| std::fs::read(d.join(f)).unwrap()));
+    }
+    assert!(
+        files[0] == files[1],
+        "projections differ between 1 and 3 threads"
+    );
 }
 
 /// Parallel beam at 0 and 90 degrees: every ray runs along a voxel axis, so each pixel's line
