@@ -2,14 +2,14 @@
 # Main job: built-in spine phantom -> cone-beam projections -> train UniSpine-GS briefly ->
 # test PSNR / SSIM. A few minutes on 2 CPU cores. Safe to re-run (outputs are replaced).
 #
-# Environment overrides: DEMO_DIR (default target/demo), DEMO_ITERS (default 2000),
+# Environment overrides: DEMO_DIR (default target/demo), DEMO_ITERS (default 1000),
 # DEMO_SIZE (phantom voxels per side, default 64), DEMO_DETECTOR (pixels per side, default 128),
 # DEMO_METHOD (default unispine).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 DIR="${DEMO_DIR:-target/demo}"
-ITERS="${DEMO_ITERS:-2000}"
+ITERS="${DEMO_ITERS:-1000}"
 SIZE="${DEMO_SIZE:-64}"
 DET="${DEMO_DETECTOR:-128}"
 METHOD="${DEMO_METHOD:-unispine}"
