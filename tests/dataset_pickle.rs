@@ -193,3 +193,35 @@ fn truncated_and_missing_files_are_named() {
         .to_string();
     assert!(e.contains("text.pickle") && e.contains("opcode"), "{e}");
 }
+
+#[test]
+fn image_is_optional_and_may_be_coarser_than_nvoxel() {
+    let ds = import(&fixture("naf_noimage.pickle"), &ImportOptions::default()).unwrap();
+    assert!(ds.volume.is_none());
+    assert_eq!(ds.train.angles.len(), 3);
+
+    // image[:1, :, ::2] of the [2, 3, 4] volume: shape [1, 3, 2], same physical box.
+    let ds = import(
+        &fixture("naf_small_image.pickle"),
+        &ImportOptions::default(),
+    )
+    .unwrap();
+    let v = ds.volume.as_ref().unwrap();
+    assert_eq!(v.dims, [1, 3, 2]);
+    assert_eq!(v.spacing, [2.0, 0.5, 4.0]);
+    assert_eq!(ds.geometry.n_voxel, [2, 3, 4]);
+    let img = values(&expected()["image"]);
+    for j in 0..3 {
+        for k in 0..2 {
+            assert_eq!(v.get(0, j, k), img[j * 4 + 2 * k] as f32);
+        }
+    }
+    assert!(
+        v.provenance.steps.iter().any(|s| s.contains("not nVoxel")),
+        "{:?}",
+        v.provenance.steps
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    store::save(&ds, tmp.path()).unwrap();
+    assert_eq!(store::load(tmp.path()).unwrap(), ds);
+}

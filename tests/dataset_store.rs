@@ -140,7 +140,15 @@ fn files_have_the_documented_layout() {
     for p in previews {
         let path = tmp.path().join(p.as_str().unwrap());
         let img = image::open(&path).unwrap().to_luma8();
-        assert_eq!((img.width(), img.height()).0 > 0, true);
+        // Views are u x v = 7 x 6; volume slices: axial x by y, coronal x by z, sagittal y by z.
+        let name = p.as_str().unwrap();
+        let want = match name {
+            "previews/volume_axial.png" => (4, 5),
+            "previews/volume_coronal.png" => (4, 3),
+            "previews/volume_sagittal.png" => (5, 3),
+            _ => (7, 6),
+        };
+        assert_eq!((img.width(), img.height()), want, "{name}");
     }
     let img = image::open(tmp.path().join("previews/train_000.png"))
         .unwrap()

@@ -66,8 +66,14 @@ fn img(v: &[f64]) -> Image2d<f64> {
     Image2d::from_vec(W, H, v.to_vec())
 }
 
-fn check(name: &str, analytic: &[f64], f: impl FnMut(&[f64]) -> f64, x: &[f64], h: f64) {
-    let num = central_diff5(f, x, h);
+fn check(name: &str, analytic: &[f64], f: impl FnMut(&[f64]) -> f64 + Send, x: &[f64], h: f64) {
+    // Thousands of tiny evaluations: one thread avoids the cross-thread wake-ups (the values
+    // do not depend on the thread count, see `loss_and_gradient_are_thread_count_invariant`).
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let num = pool.install(|| central_diff5(f, x, h));
     let err = rel_err_maxabs(analytic, &num);
     println!("{name}: max-abs-normalised error {err:.3e}");
     assert!(err <= TOL, "{name}: error {err:e} > {TOL:e}");
@@ -346,4 +352,94 @@ fn spwm_weights_properties() {
     );
     assert_eq!(sig.tau, at.tau);
     assert!(sig.gate.data.iter().all(|&g| g > 0.0 && g < 1.0));
+}
+
+/// Figures for notes/losses.md (not a timed assertion):
+/// `cargo test --release --test loss_gradcheck -- --ignored --nocapture timing`
+/// (add `RAYON_NUM_THREADS=1` for one thread).
+#[test]
+#[ignore]
+fn timing_at_256() {
+    let (w, h) = (256, 256);
+    let mut rng = ChaCha8Rng::seed_from_u64(70);
+    let gt = Image2d::from_vec(w, h, (0..w * h).map(|_| rng.random::<f64>()).collect());
+    let r = Image2d::from_vec(
+        w,
+        h,
+        gt.data
+            .iter()
+            .map(|v| v + 0.05 * (rng.random::<f64>() - 0.5))
+            .collect(),
+    );
+    let cfg = SpwmConfig::default();
+    let (gt32, r32) = (gt.cast::<f32>(), r.cast::<f32>());
+    let reps = 60;
+    // The minimum over repetitions (the machine may be shared; the minimum is the least noisy).
+    let time = |name: &str, f: &mut dyn FnMut()| {
+        f();
+        let mut best = f64::INFINITY;
+        for _ in 0..reps {
+            let t = std::time::Instant::now();
+            f();
+            best = best.min(t.elapsed().as_secs_f64() * 1e3);
+        }
+        println!(
+            "{name}: {best:.3} ms ({} threads)",
+            rayon::current_num_threads()
+        );
+    };
+    let prior32 = spwm::view_prior(&gt32, &cfg);
+    let w32 = spwm::weights(&prior32, 9000, &cfg);
+    let lc = LossConfig::default();
+    time("spwm::view_prior f32 256x256", &mut || {
+        std::hint::black_box(spwm::view_prior(&gt32, &cfg));
+    });
+    time("spwm::weights f32 256x256", &mut || {
+        std::hint::black_box(spwm::weights(&prior32, 9000, &cfg));
+    });
+    time(
+        "forward_backward (w-charb + D-SSIM) f32 256x256",
+        &mut || {
+            std::hint::black_box(forward_backward(&r32, &gt32, Some(&w32), &lc));
+        },
+    );
+    time("forward_backward (L1 + D-SSIM) f32 256x256", &mut || {
+        std::hint::black_box(forward_backward(&r32, &gt32, None, &LossConfig::l1_dssim()));
+    });
+    let k11 = unispine::loss::filters::gaussian_kernel(11, 1.5, 0.0);
+    time("blur 11 taps f32 256x256", &mut || {
+        std::hint::black_box(unispine::loss::filters::blur(&r32, &k11));
+    });
+    time("ssim_forward_backward f32 256x256", &mut || {
+        std::hint::black_box(ssim_forward_backward(&r32, &gt32));
+    });
+    time("weighted_charbonnier f32 256x256", &mut || {
+        std::hint::black_box(weighted_charbonnier(&r32, &gt32, Some(&w32), 1e-3, 1e-6));
+    });
+    time("l1 f32 256x256", &mut || {
+        std::hint::black_box(l1(&r32, &gt32));
+    });
+    time("det_sum_by |e| f32 256x256", &mut || {
+        std::hint::black_box(unispine::par::det_sum_by(r32.data.len(), |p| {
+            (r32.data[p] as f64 - gt32.data[p] as f64).abs()
+        }));
+    });
+    time("ssim f32 256x256", &mut || {
+        std::hint::black_box(ssim(&r32, &gt32));
+    });
+    let w64 = spwm::weights(&spwm::view_prior(&gt, &cfg), 9000, &cfg);
+    time(
+        "forward_backward (w-charb + D-SSIM) f64 256x256",
+        &mut || {
+            std::hint::black_box(forward_backward(&r, &gt, Some(&w64), &lc));
+        },
+    );
+    let (v64, g64) = forward_backward(&r, &gt, Some(&w64), &lc);
+    let (v32, g32) = forward_backward(&r32, &gt32, Some(&w32), &lc);
+    let g32: Vec<f64> = g32.data.iter().map(|&v| v as f64).collect();
+    println!(
+        "f32 vs f64 at 256x256: total rel {:.2e}, gradient max-abs-normalised {:.2e}",
+        ((v32.total - v64.total) / v64.total).abs(),
+        rel_err_maxabs(&g32, &g64.data)
+    );
 }

@@ -88,7 +88,8 @@ fn phantom_and_proxy_are_bit_identical_for_1_2_8_threads() {
                 .build()
                 .unwrap();
             outs.push(pool.install(|| {
-                let p = phantom::generate_detailed(&spec).unwrap();
+                // The adult run also covers the partial-volume pass.
+                let p = phantom::generate_partial_volume(&spec, if fetal { 1 } else { 2 }).unwrap();
                 // The proxy along each of the three axes (three code paths of the scan).
                 let us: Vec<Vec<u32>> = [
                     ultrasound::BeamDir::YNeg,
@@ -258,6 +259,10 @@ fn vertebra_ids_25_50_are_present_and_crop_to_the_spine() {
     // Cropping to ids 25-50 keeps the spine and drops most of the torso in x and y.
     assert!(hi[0] - lo[0] < nx * 9 / 10 && hi[1] - lo[1] < ny * 9 / 10);
     assert!(lo[0] > 0 && lo[1] > 0 && hi[0] < nx - 1 && hi[1] < ny - 1);
+    // The crate's crop to label ids 25-50 (as for the real CT) gives exactly that box.
+    let cropped =
+        unispine::volume::resample::crop_to_labels(&p.mu, &p.labels, &(25u16..=50), 0.0).unwrap();
+    assert_eq!(cropped.dims, [0, 1, 2].map(|a| hi[a] - lo[a] + 1));
 }
 
 #[test]
@@ -668,6 +673,10 @@ fn bad_specs_give_errors_naming_the_field() {
         ..PhantomSpec::default()
     };
     assert!(err(phantom::generate(&s)).contains("`dims`"));
+    for ss in [0, 9] {
+        let e = phantom::generate_partial_volume(&PhantomSpec::default(), ss).unwrap_err();
+        assert!(e.to_string().contains("`supersample`"), "{e}");
+    }
 
     let labels = &adult().labels;
     let perr = |l: &LabelMap, s: &UsProxySpec| ultrasound::proxy(l, s).unwrap_err().to_string();
@@ -755,7 +764,11 @@ fn default_phantom_and_proxy_are_fast() {
     let tp = t.elapsed().as_secs_f64();
     let us = ultrasound::proxy(&labels, &UsProxySpec::default()).unwrap();
     let tu = t.elapsed().as_secs_f64() - tp;
-    println!("phantom {tp:.3} s, proxy {tu:.3} s");
+    let t2 = std::time::Instant::now();
+    let pv = phantom::generate_partial_volume(&PhantomSpec::default(), 2).unwrap();
+    let tpv = t2.elapsed().as_secs_f64();
+    println!("phantom {tp:.3} s, proxy {tu:.3} s, phantom with supersample 2 {tpv:.3} s");
+    assert!(pv.mu.len() == us.len() && tpv < 6.0);
     assert!(us.len() == 128 * 128 * 128);
     assert!(tp < 3.0 && tu < 6.0, "phantom {tp} s, proxy {tu} s");
 }
@@ -806,4 +819,88 @@ fn proxy_speckle_has_unit_mean_on_uniform_tissue() {
             "mean/std {ratio} vs {rayleigh}"
         );
     }
+}
+
+/// Partial volume: interior voxels keep their exact table value, boundary voxels take values
+/// between those of the tissues that meet there, the total attenuation is conserved, and the
+/// label map is unchanged.
+#[test]
+fn partial_volume_mixes_only_boundary_voxels() {
+    let crisp = adult();
+    let pv = phantom::generate_partial_volume(&PhantomSpec::default(), 3).unwrap();
+    assert_eq!(pv.labels.data, crisp.labels.data);
+    assert_eq!(pv.tissue, crisp.tissue);
+    let [nx, ny, nz] = crisp.mu.dims;
+    let (mut changed, mut boundary) = (0usize, 0usize);
+    let (lo, hi) = (Tissue::Air.mu(), Tissue::Cortical.mu());
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let idx = crisp.mu.index(i, j, k);
+                let t = crisp.tissue[idx];
+                let mut nb = vec![];
+                if i > 0 {
+                    nb.push(crisp.mu.index(i - 1, j, k));
+                }
+                if i + 1 < nx {
+                    nb.push(crisp.mu.index(i + 1, j, k));
+                }
+                if j > 0 {
+                    nb.push(crisp.mu.index(i, j - 1, k));
+                }
+                if j + 1 < ny {
+                    nb.push(crisp.mu.index(i, j + 1, k));
+                }
+                if k > 0 {
+                    nb.push(crisp.mu.index(i, j, k - 1));
+                }
+                if k + 1 < nz {
+                    nb.push(crisp.mu.index(i, j, k + 1));
+                }
+                let is_boundary = nb.iter().any(|&q| crisp.tissue[q] != t);
+                let (a, b) = (crisp.mu.data[idx], pv.mu.data[idx]);
+                if is_boundary {
+                    boundary += 1;
+                    assert!((lo..=hi).contains(&b));
+                    // Between the smallest and largest value of the 26-neighbourhood (a corner
+                    // of another tissue can reach into the voxel), with a small tolerance for
+                    // the cancellous texture, which varies inside a voxel.
+                    let mut vals = vec![];
+                    for c in k.saturating_sub(1)..(k + 2).min(nz) {
+                        for bb in j.saturating_sub(1)..(j + 2).min(ny) {
+                            for aa in i.saturating_sub(1)..(i + 2).min(nx) {
+                                vals.push(crisp.mu.data[crisp.mu.index(aa, bb, c)]);
+                            }
+                        }
+                    }
+                    let vmin = vals.iter().cloned().fold(f32::MAX, f32::min) - 2e-3;
+                    let vmax = vals.iter().cloned().fold(f32::MIN, f32::max) + 2e-3;
+                    assert!(
+                        b >= vmin && b <= vmax,
+                        "voxel ({i},{j},{k}): {b} outside [{vmin}, {vmax}]"
+                    );
+                    if a != b {
+                        changed += 1;
+                    }
+                } else {
+                    assert_eq!(
+                        a.to_bits(),
+                        b.to_bits(),
+                        "interior voxel ({i},{j},{k}) changed"
+                    );
+                }
+            }
+        }
+    }
+    assert!(
+        changed > boundary / 4,
+        "{changed} of {boundary} boundary voxels changed"
+    );
+    let total = |v: &[f32]| v.iter().map(|&x| x as f64).sum::<f64>();
+    let (tc, tp) = (total(&crisp.mu.data), total(&pv.mu.data));
+    println!("partial volume: {changed} of {boundary} boundary voxels changed; total mu {tc:.2} -> {tp:.2}");
+    assert!(
+        (tp / tc - 1.0).abs() < 0.01,
+        "total attenuation {tc} -> {tp}"
+    );
 }

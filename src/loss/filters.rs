@@ -43,15 +43,19 @@ fn correlate_rows<R: Real>(x: &Image2d<R>, k: &[R]) -> Image2d<R> {
         .par_chunks_mut(w)
         .zip(x.data.par_chunks(w))
         .for_each(|(o, xi)| {
-            for (j, oj) in o.iter_mut().enumerate() {
-                // Taps t with 0 <= j + t - r < w.
-                let t_lo = r.saturating_sub(j);
-                let t_hi = k.len().min(w + r - j);
-                let mut acc = R::zero();
-                for t in t_lo..t_hi {
-                    acc += k[t] * xi[j + t - r];
+            // Per pixel: acc = 0 + k[t_lo] x[..] + k[t_lo + 1] x[..] + ..., taps ascending (the
+            // loop runs over taps outside and pixels inside so that it vectorises).
+            for (t, &kt) in k.iter().enumerate() {
+                // Pixels j with 0 <= j + t - r < w.
+                let j_lo = r.saturating_sub(t);
+                let j_hi = w.min((w + r).saturating_sub(t));
+                if j_lo >= j_hi {
+                    continue;
                 }
-                *oj = acc;
+                let src = &xi[j_lo + t - r..j_hi + t - r];
+                for (oj, &xj) in o[j_lo..j_hi].iter_mut().zip(src) {
+                    *oj += kt * xj;
+                }
             }
         });
     out

@@ -151,18 +151,32 @@ pub struct Attention<R: Real> {
 }
 
 /// Linear-interpolated quantile of `v` (numpy / torch `linear`): sorted[i] + f (sorted[i+1] -
-/// sorted[i]) at position q (n - 1) = i + f.
+/// sorted[i]) at position q (n - 1) = i + f. The two order statistics are found by selection
+/// (O(n)); their values do not depend on the algorithm.
 pub fn quantile_linear(v: &[f64], q: f64) -> f64 {
     assert!(!v.is_empty(), "quantile of an empty set");
     let mut s = v.to_vec();
-    s.sort_by(|a, b| a.total_cmp(b));
-    let pos = q * (s.len() - 1) as f64;
-    let i = (pos.floor() as usize).min(s.len() - 1);
+    let n = s.len();
+    let pos = q * (n - 1) as f64;
+    let i = (pos.floor() as usize).min(n - 1);
     let f = pos - i as f64;
-    if i + 1 < s.len() {
-        s[i] + f * (s[i + 1] - s[i])
+    let (_, &mut lo, upper) = s.select_nth_unstable_by(i, |a, b| a.total_cmp(b));
+    if i + 1 < n {
+        // sorted[i + 1] is the smallest element of the part above position i.
+        let hi =
+            upper.iter().copied().fold(
+                f64::INFINITY,
+                |m, x| {
+                    if x.total_cmp(&m).is_lt() {
+                        x
+                    } else {
+                        m
+                    }
+                },
+            );
+        lo + f * (hi - lo)
     } else {
-        s[i]
+        lo
     }
 }
 
@@ -291,6 +305,26 @@ mod tests {
         assert_eq!(quantile_linear(&v, 0.0), 1.0);
         assert_eq!(quantile_linear(&v, 1.0), 5.0);
         assert_eq!(quantile_linear(&[2.5], 0.85), 2.5);
+        // Against a full sort on random data with ties.
+        let mut x = 0.123_f64;
+        let v: Vec<f64> = (0..1001)
+            .map(|_| {
+                x = (x * 997.0 + 0.31).fract();
+                (x * 50.0).floor() / 50.0
+            })
+            .collect();
+        let mut s = v.clone();
+        s.sort_by(|a, b| a.total_cmp(b));
+        for q in [0.0f64, 0.1, 0.5, 0.85, 0.999, 1.0] {
+            let pos = q * 1000.0;
+            let i = (pos.floor() as usize).min(1000);
+            let want = if i < 1000 {
+                s[i] + (pos - i as f64) * (s[i + 1] - s[i])
+            } else {
+                s[i]
+            };
+            assert_eq!(quantile_linear(&v, q).to_bits(), want.to_bits(), "q = {q}");
+        }
     }
 
     #[test]

@@ -126,13 +126,15 @@ pub fn ssim_forward_backward<R: Real>(x: &Image2d<R>, y: &Image2d<R>) -> (f64, I
         .into_par_iter()
         .map(|p| {
             let (mx, my, a1, a2, b1, b2) = terms(&s, p);
-            let b1b2 = b1 * b2;
-            let sv = (a1 * a2) / b1b2;
+            // S exactly as in `ssim_map` (so the value is bit-identical to `ssim`); the
+            // partials with two reciprocals instead of five divisions.
+            let sv = (a1 * a2) / (b1 * b2);
+            let (ib1, ib2) = (R::one() / b1, R::one() / b2);
+            let ib = ib1 * ib2;
             let two = R::c(2.0);
-            let d_mu =
-                two * my * (a2 - a1) / b1b2 - two * mx * sv * (R::one() / b1 - R::one() / b2);
-            let d_exx = -sv / b2;
-            let d_exy = two * a1 / b1b2;
+            let d_mu = two * my * (a2 - a1) * ib - two * mx * sv * (ib1 - ib2);
+            let d_exx = -sv * ib2;
+            let d_exy = two * a1 * ib;
             (sv, d_mu * inv_n, d_exx * inv_n, d_exy * inv_n)
         })
         .collect();

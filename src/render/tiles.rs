@@ -76,15 +76,22 @@ pub fn tile_rect(u: f64, v: f64, r: u32, tiles_x: usize, tiles_y: usize) -> Opti
     (tx0 < tx1 && ty0 < ty1).then_some([tx0, tx1, ty0, ty1])
 }
 
-/// Sort key of a depth: the IEEE-754 total order of its f64 value as an unsigned integer.
+/// Sort key of a depth: the IEEE-754 total order of its value rounded to f32 (3DGS sorts the
+/// f32 depth bits), as an unsigned integer.
 #[inline]
-pub fn depth_key(d: f64) -> u64 {
-    let b = d.to_bits();
-    if b >> 63 == 1 {
+pub fn depth_key(d: f64) -> u32 {
+    let b = (d as f32).to_bits();
+    if b >> 31 == 1 {
         !b
     } else {
-        b | (1 << 63)
+        b | (1 << 31)
     }
+}
+
+/// The unique sort key (depth key, Gaussian index) of Gaussian `i` at depth `d`.
+#[inline]
+pub fn sort_key(d: f64, i: u32) -> u64 {
+    ((depth_key(d) as u64) << 32) | i as u64
 }
 
 /// A splat is drawn when its radius is positive and its screen-space fields are finite.
@@ -141,18 +148,22 @@ pub fn bin<R: Real>(s: &Splats<R>, width: usize, height: usize) -> TileBins {
             }
         }
     }
-    // Per-tile sort by the unique key (depth total order, index).
-    let keys: Vec<u64> = s.depth.par_iter().map(|d| depth_key(d.f64())).collect();
-    let mut slices: Vec<&mut [u32]> = Vec::with_capacity(n_tiles);
-    let mut rest: &mut [u32] = &mut ids;
+    // Per-tile sort by the unique key (depth key, index).
+    let mut keyed: Vec<u64> = ids
+        .iter()
+        .map(|&i| sort_key(s.depth[i as usize].f64(), i))
+        .collect();
+    let mut slices: Vec<&mut [u64]> = Vec::with_capacity(n_tiles);
+    let mut rest: &mut [u64] = &mut keyed;
     for t in 0..n_tiles {
         let (a, b) = rest.split_at_mut(offsets[t + 1] - offsets[t]);
         slices.push(a);
         rest = b;
     }
-    slices
-        .par_iter_mut()
-        .for_each(|l| l.sort_unstable_by_key(|&i| (keys[i as usize], i)));
+    slices.par_iter_mut().for_each(|l| l.sort_unstable());
+    for (d, k) in ids.iter_mut().zip(&keyed) {
+        *d = *k as u32;
+    }
     TileBins {
         width,
         height,

@@ -510,3 +510,40 @@ pub fn run_paths(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
         dir.join("model.ply"),
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dataset::{Manifest, Split};
+
+    #[test]
+    fn extent_matches_upstream_for_50_views_over_180_degrees() {
+        // research section 2: 1.1 x max |c_i - mean(c)| = 1285.36 mm for DSO = 1000 mm.
+        let angles: Vec<f64> = (0..50)
+            .map(|k| k as f64 * std::f64::consts::PI / 50.0)
+            .collect();
+        let ds = Dataset {
+            geometry: crate::geometry::ConeBeam {
+                dsd: 1500.0,
+                dso: 1000.0,
+                n_detector: [8, 8],
+                d_detector: [1.0, 1.0],
+                n_voxel: [8, 8, 8],
+                d_voxel: [1.0; 3],
+                off_origin: [0.0; 3],
+                off_detector: [0.0; 2],
+                mode: crate::geometry::Mode::Cone,
+                accuracy: 0.5,
+            },
+            train: Split {
+                angles,
+                projections: vec![],
+            },
+            test: Split::default(),
+            manifest: Manifest::default(),
+            volume: None,
+        };
+        let e = scene_extent(&ds, 50);
+        assert!((e - 1285.36).abs() < 0.01, "{e}");
+    }
+}

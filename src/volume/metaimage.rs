@@ -276,7 +276,9 @@ pub fn read(path: &Path) -> Result<Volume<f32>> {
             }
             None => stream,
         };
-        let mut out = Vec::with_capacity(need);
+        // Capacity bounded by deflate's largest ratio (about 1032:1), so a header claiming a
+        // huge DimSize cannot make us reserve more than the stream can hold.
+        let mut out = Vec::with_capacity(need.min(src.len().saturating_mul(1032)));
         let gz = src.starts_with(&[0x1f, 0x8b]);
         let res = if gz {
             flate2::read::GzDecoder::new(src)

@@ -60,13 +60,14 @@ fn file_bytes(path: &Path) -> Result<Vec<u8>> {
     if !gz {
         return Ok(raw);
     }
-    // The gzip footer holds the uncompressed size mod 2^32: a capacity hint only.
+    // The gzip footer holds the uncompressed size mod 2^32: a capacity hint only, bounded by
+    // deflate's largest ratio (about 1032:1).
     let hint = raw
         .len()
         .checked_sub(4)
         .map(|n| u32::from_le_bytes([raw[n], raw[n + 1], raw[n + 2], raw[n + 3]]) as usize)
         .unwrap_or(0);
-    let mut out = Vec::with_capacity(hint.min(1 << 31));
+    let mut out = Vec::with_capacity(hint.min(raw.len().saturating_mul(1032)));
     flate2::read::MultiGzDecoder::new(&raw[..])
         .read_to_end(&mut out)
         .map_err(|e| {

@@ -391,3 +391,19 @@ pub fn resample_trilinear<R: Real>(vol: &Volume<R>, dims: [usize; 3]) -> Result<
         provenance,
     })
 }
+
+/// Trilinear resampling to voxels of about `spacing` mm (e.g. isotropic `[1.0; 3]`): the new
+/// voxel counts are `round(n d / spacing)` (at least 1) and, as in [`resample_trilinear`], the
+/// physical extent is kept, so the final spacing is `n d / n'`, within half a voxel of the
+/// request over the whole extent.
+pub fn resample_to_spacing<R: Real>(vol: &Volume<R>, spacing: [f64; 3]) -> Result<Volume<R>> {
+    if spacing.iter().any(|&s| !(s.is_finite() && s > 0.0)) {
+        return Err(Error::invalid(
+            "spacing",
+            format!("{spacing:?} mm is not a positive finite voxel size"),
+        ));
+    }
+    let size = vol.size_mm();
+    let dims = [0, 1, 2].map(|a| ((size[a] / spacing[a]).round() as usize).max(1));
+    resample_trilinear(vol, dims)
+}

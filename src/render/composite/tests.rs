@@ -153,3 +153,98 @@ fn splat_gradients_match_central_differences() {
         }
     }
 }
+
+#[test]
+fn exp_f32_is_within_2e_7_of_exp() {
+    let mut worst: f64 = 0.0;
+    let n = 200_000;
+    for k in 0..=n {
+        let x = -87.0 + 87.0 * k as f64 / n as f64;
+        let xf = x as f32;
+        let got = exp_f32(xf) as f64;
+        let want = (xf as f64).exp();
+        worst = worst.max((got - want).abs() / want);
+    }
+    println!("exp_f32 max relative error on [-87, 0]: {worst:.2e}");
+    assert!(worst < 2e-7, "{worst:e}");
+    assert_eq!(exp_f32(0.0), 1.0);
+    assert_eq!(exp_k(0.5f64), 0.5f64.exp());
+}
+
+#[test]
+fn alpha_clamp_and_exclusive_stop() {
+    // Three splats on one pixel, each o G > 0.99 there (clamped to 0.99), colours 1, 2, 4.
+    // T: 1 -> 0.01 -> 1e-4 (not < 1e-4: blended) -> the third would give 1e-6 < 1e-4: the pixel
+    // stops without blending it (exclusive).
+    let n = 3;
+    let s = Splats {
+        mean2d: vec![[0.5, 0.5]; n],
+        conic: vec![[0.01, 0.0, 0.01]; n],
+        depth: vec![1.0, 2.0, 3.0],
+        radius: vec![3; n],
+        opacity: vec![0.995; n],
+        color: vec![1.0, 2.0, 4.0],
+    };
+    let bg = 0.5;
+    let (img, saved) = forward(&s, 1, 1, bg);
+    let om = 1.0 - 0.99f64;
+    let t2 = om * om;
+    assert!(t2 >= T_MIN && t2 * om < T_MIN);
+    let want = 0.99 * 1.0 + om * 0.99 * 2.0 + t2 * bg;
+    assert!(
+        (img.data[0] - want).abs() < 1e-15,
+        "{} vs {want}",
+        img.data[0]
+    );
+    assert_eq!(saved.n_contrib[0], 2);
+    assert_eq!(saved.final_t[0], t2);
+    assert_eq!(saved.blends, 2);
+    let g = backward(&s, &saved, &Image2d::filled(1, 1, 1.0));
+    // Clamped: no gradient to opacity, mean or conic; colour gets alpha T.
+    for i in 0..3 {
+        assert_eq!(g.opacity[i], 0.0);
+        assert_eq!(g.mean2d[i], [0.0, 0.0]);
+        assert_eq!(g.conic[i], [0.0; 3]);
+    }
+    assert!((g.color[0] - 0.99).abs() < 1e-15);
+    assert!((g.color[1] - 0.99 * om).abs() < 1e-15);
+    assert_eq!(g.color[2], 0.0, "the stopping splat is not blended");
+    // Below the clamp the opacity gradient is G dC/dalpha (non-zero).
+    let mut s2 = s.clone();
+    s2.opacity = vec![0.5; 3];
+    let (_, sv2) = forward(&s2, 1, 1, bg);
+    let g2 = backward(&s2, &sv2, &Image2d::filled(1, 1, 1.0));
+    assert!(g2.opacity.iter().all(|&v| v != 0.0));
+}
+
+#[test]
+fn alpha_below_1_over_255_is_skipped() {
+    let s = Splats {
+        mean2d: vec![[0.5, 0.5], [0.5, 0.5]],
+        conic: vec![[0.01, 0.0, 0.01]; 2],
+        depth: vec![1.0, 2.0],
+        radius: vec![3; 2],
+        opacity: vec![0.5 / 255.0, 0.5],
+        color: vec![10.0, 1.0],
+    };
+    let (img, saved) = forward(&s, 1, 1, 0.0);
+    assert_eq!(img.data[0], 0.5);
+    assert_eq!(saved.blends, 1);
+    let g = backward(&s, &saved, &Image2d::filled(1, 1, 1.0));
+    assert_eq!((g.opacity[0], g.color[0]), (0.0, 0.0));
+}
+
+#[test]
+fn nan_splats_are_an_error_and_never_poison_the_image() {
+    let mut s = random_splats(30, 40, 30, 9);
+    assert!(validate(&s).is_ok());
+    s.conic[4][1] = f64::NAN;
+    s.radius[4] = 5;
+    let e = validate(&s).unwrap_err().to_string();
+    assert!(e.contains("splat 4") && e.contains("conic"), "{e}");
+    let (img, saved) = forward(&s, 40, 30, 0.0);
+    assert!(img.data.iter().all(|v| v.is_finite()));
+    let g = backward(&s, &saved, &Image2d::filled(40, 30, 1.0));
+    assert_eq!(g.conic[4], [0.0; 3]);
+    assert!(g.mean2d.iter().flatten().all(|v| v.is_finite()));
+}

@@ -108,7 +108,7 @@ pub(crate) struct Layout {
 }
 
 /// Per-slice quantities (depend on z only).
-pub(crate) struct Slice {
+pub struct Slice {
     z: f64,
     cand: Vec<usize>,
     /// Canal centre, semi-axes, rotation (cos, sin).
