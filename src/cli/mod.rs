@@ -7,6 +7,7 @@ pub mod eval;
 pub mod gradcheck;
 pub mod progress;
 pub mod render;
+pub mod report;
 pub mod train;
 
 use clap::{Parser, Subcommand};
@@ -35,6 +36,8 @@ pub enum Command {
     Train(train::TrainArgs),
     /// Re-evaluate a saved run on its test views.
     Eval(eval::EvalArgs),
+    /// Compare finished runs: one markdown table row per run folder (from its metrics.json).
+    Report(report::ReportArgs),
     /// Benchmarks that print ratios against a baseline measured in the same run.
     Bench(bench::BenchArgs),
 }
@@ -48,6 +51,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Gradcheck(a) => gradcheck::run(a),
         Command::Train(a) => train::run(a),
         Command::Eval(a) => eval::run(a),
+        Command::Report(a) => report::run(a),
         Command::Bench(a) => bench::run(a),
     }
 }
