@@ -130,6 +130,8 @@ fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Entry<R>>> {
             let o = s.opacity[i].f64();
             // alpha <= o G <= o: nothing to draw unless o >= 1/255 (up to the margin).
             let l = (255.0 * o).ln() + BOX_LOG_MARGIN;
+            // Positive phrasing so that NaN fails.
+            #[allow(clippy::neg_cmp_op_on_partial_ord)]
             if !(l > 0.0) {
                 return None;
             }
