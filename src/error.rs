@@ -6,8 +6,9 @@ use std::path::PathBuf;
 /// Errors returned by the library. The binary wraps them with `anyhow`.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// A file could not be opened, read or written.
-    #[error("{path}: {source}")]
+    /// A file could not be opened, read or written. The message names the file; the I/O error
+    /// is the `source` only, so an error chain (`{:#}` in anyhow) prints it once.
+    #[error("{path}")]
     Io {
         path: PathBuf,
         #[source]

@@ -1,1 +1,93 @@
-//! TODO
+//! Exact line integrals through a piecewise-constant voxel grid (Siddon 1985, traversed
+//! incrementally as Amanatides & Woo 1987 / Jacobs et al. 1998 do; TIGRE's default `Siddon`
+//! projector, which made the NAF / X-Gaussian ground-truth projections).
+//!
+//! For a ray `p(t) = o + t d` (unit `d`, `t` in mm) clipped to the volume box, the integral is
+//! `sum_k (t_{k+1} - t_k) v(voxel_k)` over the segments between consecutive voxel-boundary
+//! crossings. The entry voxel and the boundary parameters are set up in f64; the traversal runs
+//! in the volume's precision `R` with `t` measured from the entry point (so f32 keeps its
+//! precision far from the source). The walk ends when an axis crosses its last boundary, which
+//! is decided with integer counters, so voxel indices never leave the grid whatever the rounding.
+
+use super::{clip_ray, Grid};
+use crate::geometry::Camera;
+use crate::real::Real;
+
+/// Integrate every pixel of detector row `row` into `out` (length = image width); returns the
+/// number of rays that met the volume box.
+pub(crate) fn row<R: Real>(grid: &Grid<R>, cam: &Camera, row: usize, out: &mut [R]) -> usize {
+    let mut hits = 0;
+    for (col, px) in out.iter_mut().enumerate() {
+        let (o, d) = cam.pixel_ray(col as f64, row as f64);
+        *px = match clip_ray(cam, o, d, grid.lo, grid.hi) {
+            Some((t0, _)) => {
+                hits += 1;
+                integrate(grid, o, d, t0)
+            }
+            None => R::zero(),
+        };
+    }
+    hits
+}
+
+/// The line integral along `o + t d` from the box entry `t_in` to the box exit.
+#[inline]
+pub(crate) fn integrate<R: Real>(grid: &Grid<R>, o: [f64; 3], d: [f64; 3], t_in: f64) -> R {
+    let n = grid.n;
+    let stride = [1isize, n[0] as isize, (n[0] * n[1]) as isize];
+    let mut tm = [R::infinity(); 3]; // next boundary crossing per axis, from the entry point
+    let mut dt = [R::zero(); 3]; // distance between crossings per axis
+    let mut left = [i64::MAX; 3]; // crossings left before the ray leaves the box along the axis
+    let mut step = [0isize; 3];
+    let mut idx = 0isize;
+    for a in 0..3 {
+        let p = o[a] + t_in * d[a];
+        let c = (p - grid.lo[a]) / grid.s[a];
+        // `as` saturates (negative and NaN to 0), then clamp to the last voxel.
+        let i = if c > 0.0 {
+            (c as usize).min(n[a] - 1)
+        } else {
+            0
+        };
+        idx += i as isize * stride[a];
+        if d[a] > 0.0 {
+            let b = grid.lo[a] + (i + 1) as f64 * grid.s[a];
+            tm[a] = R::c((b - p) / d[a]);
+            dt[a] = R::c(grid.s[a] / d[a]);
+            left[a] = (n[a] - i) as i64;
+            step[a] = stride[a];
+        } else if d[a] < 0.0 {
+            let b = grid.lo[a] + i as f64 * grid.s[a];
+            tm[a] = R::c((b - p) / d[a]);
+            dt[a] = R::c(-grid.s[a] / d[a]);
+            left[a] = i as i64 + 1;
+            step[a] = -stride[a];
+        }
+    }
+    let data = grid.data;
+    let mut t = R::zero();
+    let mut acc = R::zero();
+    loop {
+        let a = if tm[0] <= tm[1] {
+            if tm[0] <= tm[2] {
+                0
+            } else {
+                2
+            }
+        } else if tm[1] <= tm[2] {
+            1
+        } else {
+            2
+        };
+        let tn = tm[a];
+        acc += (tn - t) * data[idx as usize];
+        t = tn;
+        left[a] -= 1;
+        if left[a] == 0 {
+            break;
+        }
+        tm[a] += dt[a];
+        idx += step[a];
+    }
+    acc
+}

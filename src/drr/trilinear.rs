@@ -1,1 +1,292 @@
-//! TODO
+//! Trilinear ray-march, after TIGRE's `interpolated` projector
+//! (Common/CUDA/ray_interpolated_projection.cu).
+//!
+//! TIGRE samples the ray on a lattice anchored at the source, `S + i (P - S) / ceil(|P - S| /
+//! accuracy)` (P = the detector pixel, lengths in voxel units), reads a trilinear texture whose
+//! border value is 0, and returns `sum of samples x step length`. We do the same with:
+//! - step `h = L / ceil(L / (accuracy x min(dVoxel)))`, `L` = source-to-pixel distance in mm
+//!   (parallel beam: `L = DSD`), so `h <= accuracy x min voxel size` and the lattice ends on the
+//!   pixel. For isotropic voxels this is TIGRE's step; for anisotropic voxels TIGRE measures
+//!   `|P - S|` in voxel-index units, which gives a step between accuracy x min and
+//!   accuracy x max voxel size depending on the direction (we keep the finer one everywhere).
+//! - sample `i` at `t_i = i h` from the ray origin (the source; for a parallel beam the point of
+//!   the source plane), for every `i` whose sample lies within half a voxel of the box, the only
+//!   places where the zero-padded interpolant is non-zero;
+//! - the end segments get no special weight (TIGRE neither): the Riemann sum simply runs over the
+//!   lattice points where the zero-padded interpolant is non-zero. The interpolant ramps
+//!   linearly from 0 to the face voxel's value over the half voxel on each side of a face, so for
+//!   a uniform box the sum converges to the exact chord (the ramp's excess outside equals its
+//!   deficit inside), with an error of order `h` per face from the lattice phase.
+//! - Result: `h x sum_i f(p(t_i))`, in mm x volume value.
+//!
+//! Samples whose 8 neighbours are all inside the grid take a fast path without bounds logic;
+//! the few within one voxel of a face take the zero-padded path.
+
+use super::{clip_ray, Grid};
+use crate::geometry::{Camera, Mode};
+use crate::real::Real;
+
+/// Integrate every pixel of detector row `row` into `out` (length = image width); returns the
+/// number of rays that met the volume box.
+pub(crate) fn row<R: Real>(
+    grid: &Grid<R>,
+    cam: &Camera,
+    accuracy: f64,
+    row: usize,
+    out: &mut [R],
+) -> usize {
+    let h0 = accuracy * grid.s[0].min(grid.s[1]).min(grid.s[2]);
+    let setup = Setup::new(grid);
+    let mut hits = 0;
+    for (col, px) in out.iter_mut().enumerate() {
+        let (o, d) = cam.pixel_ray(col as f64, row as f64);
+        if clip_ray(cam, o, d, grid.lo, grid.hi).is_some() {
+            hits += 1;
+        }
+        // Source (or source plane) to pixel distance along the ray.
+        let len = match cam.mode {
+            Mode::Cone => {
+                let z = cam.rot[2];
+                cam.dsd / (z[0] * d[0] + z[1] * d[1] + z[2] * d[2])
+            }
+            Mode::Parallel => cam.dsd,
+        };
+        let h = len / (len / h0).ceil();
+        *px = integrate(grid, &setup, cam, o, d, h);
+    }
+    hits
+}
+
+/// Per-volume constants.
+pub(crate) struct Setup {
+    /// Box where the zero-padded interpolant can be non-zero (box + half a voxel).
+    outer: ([f64; 3], [f64; 3]),
+    /// Box of voxel centres (all 8 neighbours inside), or `None` if an axis has 1 voxel.
+    inner: Option<([f64; 3], [f64; 3])>,
+}
+
+impl Setup {
+    pub(crate) fn new<R: Real>(grid: &Grid<R>) -> Self {
+        let mut olo = [0.0; 3];
+        let mut ohi = [0.0; 3];
+        let mut ilo = [0.0; 3];
+        let mut ihi = [0.0; 3];
+        for a in 0..3 {
+            olo[a] = grid.lo[a] - grid.s[a] / 2.0;
+            ohi[a] = grid.hi[a] + grid.s[a] / 2.0;
+            ilo[a] = grid.lo[a] + grid.s[a] / 2.0;
+            ihi[a] = grid.hi[a] - grid.s[a] / 2.0;
+        }
+        Setup {
+            outer: (olo, ohi),
+            inner: grid.n.iter().all(|&n| n >= 2).then_some((ilo, ihi)),
+        }
+    }
+}
+
+/// `h x sum` of the zero-padded trilinear interpolant at `o + i h d` over all integers `i`
+/// (`i >= 0` for a cone beam).
+#[inline]
+pub(crate) fn integrate<R: Real>(
+    grid: &Grid<R>,
+    setup: &Setup,
+    cam: &Camera,
+    o: [f64; 3],
+    d: [f64; 3],
+    h: f64,
+) -> R {
+    let Some((ta, tb)) = clip_ray(cam, o, d, setup.outer.0, setup.outer.1) else {
+        return R::zero();
+    };
+    let i_lo = (ta / h).ceil() as i64;
+    let i_hi = (tb / h).floor() as i64;
+    if i_hi < i_lo {
+        return R::zero();
+    }
+    // Continuous voxel-index coordinates (voxel centres at integers) of sample i:
+    // q(i) = q0 + i * dq.
+    let mut q0 = [0.0f64; 3];
+    let mut dq = [0.0f64; 3];
+    for a in 0..3 {
+        q0[a] = (o[a] - grid.lo[a]) / grid.s[a] - 0.5;
+        dq[a] = h * d[a] / grid.s[a];
+    }
+    // Fast range [j_lo, j_hi] of samples inside the box of voxel centres.
+    let (j_lo, j_hi) = match setup.inner {
+        Some((ilo, ihi)) => match clip_ray(cam, o, d, ilo, ihi) {
+            Some((tc, td)) => (
+                ((tc / h).ceil() as i64).max(i_lo),
+                ((td / h).floor() as i64).min(i_hi),
+            ),
+            None => (i_hi + 1, i_hi),
+        },
+        None => (i_hi + 1, i_hi),
+    };
+    let mut acc = R::zero();
+    if j_lo <= j_hi {
+        for i in i_lo..j_lo {
+            acc += sample_padded(grid, at(q0, dq, i));
+        }
+        let mut padded = R::zero();
+        acc += march_inner(grid, q0, dq, j_lo, j_hi, &mut padded);
+        acc += padded;
+        for i in j_hi + 1..=i_hi {
+            acc += sample_padded(grid, at(q0, dq, i));
+        }
+    } else {
+        for i in i_lo..=i_hi {
+            acc += sample_padded(grid, at(q0, dq, i));
+        }
+    }
+    acc * R::c(h)
+}
+
+#[inline(always)]
+fn at(q0: [f64; 3], dq: [f64; 3], i: i64) -> [f64; 3] {
+    let f = i as f64;
+    [q0[0] + f * dq[0], q0[1] + f * dq[1], q0[2] + f * dq[2]]
+}
+
+/// Fixed-point scale of the fast path: positions in voxel units x 2^32, in `i64`.
+const FIX: f64 = 4294967296.0;
+
+/// Sum of the samples `j_lo..=j_hi` (sample `i` at continuous index `q0 + i dq`), 0 when the range
+/// is empty. Samples outside the fast range go to the zero-padded path and are added
+/// to `padded`. The fast path steps positions in 32.32 fixed point: the position of
+/// sample `j_lo + k` is `p0 + k dp` exactly (integer arithmetic), so it is a linear function of
+/// `k` and lies in `[0, n - 1]` on every axis for all `k` as soon as it does at both ends, which
+/// is checked (end samples that fail move to the zero-padded path; a sample exactly on the last
+/// voxel centre also takes that path). The quantisation of the
+/// start and step (2^-33 voxel) moves a sample by less than 1e-6 voxel over 4000 steps.
+fn march_inner<R: Real>(
+    grid: &Grid<R>,
+    q0: [f64; 3],
+    dq: [f64; 3],
+    mut j_lo: i64,
+    mut j_hi: i64,
+    padded: &mut R,
+) -> R {
+    let [nx, ny, nz] = grid.n;
+    let data = grid.data;
+    let nxy = nx * ny;
+    debug_assert!(data.len() == nxy * nz && nx >= 2 && ny >= 2 && nz >= 2);
+    let lim = [
+        (nx as i64 - 1) << 32,
+        (ny as i64 - 1) << 32,
+        (nz as i64 - 1) << 32,
+    ];
+    let fixed = |i: i64| -> [i64; 3] {
+        let q = at(q0, dq, i);
+        [
+            (q[0] * FIX).round() as i64,
+            (q[1] * FIX).round() as i64,
+            (q[2] * FIX).round() as i64,
+        ]
+    };
+    let dp = [
+        (dq[0] * FIX).round() as i64,
+        (dq[1] * FIX).round() as i64,
+        (dq[2] * FIX).round() as i64,
+    ];
+    let inside = |p: [i64; 3]| (0..3).all(|a| p[a] >= 0 && p[a] < lim[a]);
+    let p0 = fixed(j_lo);
+    let pos = |k: i64| -> [i64; 3] { [p0[0] + k * dp[0], p0[1] + k * dp[1], p0[2] + k * dp[2]] };
+    // Move end samples that rounding put outside the centre box to the padded path.
+    let mut k_lo = 0i64;
+    while j_lo + k_lo <= j_hi && !inside(pos(k_lo)) {
+        *padded += sample_padded(grid, at(q0, dq, j_lo + k_lo));
+        k_lo += 1;
+    }
+    while j_hi >= j_lo + k_lo && !inside(pos(j_hi - j_lo)) {
+        *padded += sample_padded(grid, at(q0, dq, j_hi));
+        j_hi -= 1;
+    }
+    j_lo += k_lo;
+    if j_hi < j_lo {
+        return R::zero();
+    }
+    let count = (j_hi - j_lo + 1) as usize;
+    let [mut px, mut py, mut pz] = pos(k_lo);
+    let [dx, dy, dz] = dp;
+    const MASK: i64 = 0xffff_ffff;
+    let inv = R::c(1.0 / FIX);
+    let mut acc = R::zero();
+    for _ in 0..count {
+        let ix = (px >> 32) as usize;
+        let iy = (py >> 32) as usize;
+        let iz = (pz >> 32) as usize;
+        let fx = fixed_frac::<R>(px & MASK) * inv;
+        let fy = fixed_frac::<R>(py & MASK) * inv;
+        let fz = fixed_frac::<R>(pz & MASK) * inv;
+        px += dx;
+        py += dy;
+        pz += dz;
+        let b = ix + nx * iy + nxy * iz;
+        // SAFETY: every position of this loop is p0 + k dp with 0 <= k < count, a linear function
+        // of k in exact integer arithmetic (no overflow: |p| < 2^63 for any grid below 2^31
+        // voxels per axis) whose two ends satisfy 0 <= p < (n - 1) 2^32 on each axis (checked
+        // above), so every position does: ix <= nx - 2, iy <= ny - 2, iz <= nz - 2, and the
+        // largest index read, b + nxy + nx + 1 <= (nx-1) + nx (ny-1) + nxy (nz-1) = len - 1.
+        let (c000, c100, c010, c110, c001, c101, c011, c111) = unsafe {
+            (
+                *data.get_unchecked(b),
+                *data.get_unchecked(b + 1),
+                *data.get_unchecked(b + nx),
+                *data.get_unchecked(b + nx + 1),
+                *data.get_unchecked(b + nxy),
+                *data.get_unchecked(b + nxy + 1),
+                *data.get_unchecked(b + nxy + nx),
+                *data.get_unchecked(b + nxy + nx + 1),
+            )
+        };
+        let c00 = c000 + fx * (c100 - c000);
+        let c10 = c010 + fx * (c110 - c010);
+        let c01 = c001 + fx * (c101 - c001);
+        let c11 = c011 + fx * (c111 - c011);
+        let c0 = c00 + fy * (c10 - c00);
+        let c1 = c01 + fy * (c11 - c01);
+        acc += c0 + fz * (c1 - c0);
+    }
+    acc
+}
+
+#[inline(always)]
+fn fixed_frac<R: Real>(f: i64) -> R {
+    <R as num_traits::NumCast>::from(f).unwrap_or_else(R::zero)
+}
+
+/// The zero-padded trilinear interpolant at continuous index `q` (voxel centres at integers).
+fn sample_padded<R: Real>(grid: &Grid<R>, q: [f64; 3]) -> R {
+    let mut i0 = [0i64; 3];
+    let mut f = [R::zero(); 3];
+    for a in 0..3 {
+        if !(q[a] > -1.0 && q[a] < grid.n[a] as f64) {
+            return R::zero();
+        }
+        let fl = q[a].floor();
+        i0[a] = fl as i64;
+        f[a] = R::c(q[a] - fl);
+    }
+    let mut acc = R::zero();
+    for corner in 0..8 {
+        let mut idx = 0usize;
+        let mut w = R::one();
+        let mut inside = true;
+        let mut mult = 1usize;
+        for a in 0..3 {
+            let up = (corner >> a) & 1 == 1;
+            let i = i0[a] + up as i64;
+            if i < 0 || i >= grid.n[a] as i64 {
+                inside = false;
+                break;
+            }
+            idx += i as usize * mult;
+            mult *= grid.n[a];
+            w *= if up { f[a] } else { R::one() - f[a] };
+        }
+        if inside {
+            acc += w * grid.data[idx];
+        }
+    }
+    acc
+}

@@ -1,1 +1,222 @@
-//! TODO
+//! Adam over the parameter groups of a [`Gaussians`] set, as `torch.optim.Adam` computes it
+//! (3DGS `training_setup`: `Adam(groups, lr=0.0, eps=1e-15)`, betas (0.9, 0.999)).
+//!
+//! Per element, with the group's step count t (1-based after the increment):
+//! ```text
+//! m <- b1 m + (1 - b1) g,   v <- b2 v + (1 - b2) g^2
+//! p <- p - (lr / (1 - b1^t)) m / (sqrt(v) / sqrt(1 - b2^t) + eps)
+//! ```
+//! which is torch's single-tensor (non-capturable) update. The bias corrections are computed in
+//! f64 and rounded to the parameter precision once per step.
+//!
+//! Six groups, as 3DGS: `xyz` (means), `f_dc` (feature 0), `f_rest` (features 1..15),
+//! `opacity`, `scaling`, `rotation`. Each group has its own step count because upstream skips
+//! a group's step when its tensor was just replaced (densification replaces all of them, the
+//! opacity reset only the opacity); torch keeps `state['step']` across those replacements.
+//! Moments are stored as two more [`Gaussians`] of the same length as the parameters;
+//! [`crate::densify`] keeps them aligned with every clone, split and prune.
+
+use rayon::prelude::*;
+
+use crate::gaussians::model::N_FEATURES;
+use crate::gaussians::Gaussians;
+use crate::par::CHUNK;
+use crate::real::Real;
+
+/// Number of parameter groups.
+pub const N_GROUPS: usize = 6;
+
+/// A parameter group (3DGS names).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Group {
+    Xyz = 0,
+    FDc = 1,
+    FRest = 2,
+    Opacity = 3,
+    Scaling = 4,
+    Rotation = 5,
+}
+
+/// Adam constants.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AdamConfig {
+    pub beta1: f64,
+    pub beta2: f64,
+    pub eps: f64,
+}
+
+impl Default for AdamConfig {
+    fn default() -> Self {
+        AdamConfig {
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-15,
+        }
+    }
+}
+
+/// Learning rate of each group, indexed by [`Group`].
+pub type GroupLr = [f64; N_GROUPS];
+
+/// Adam state: first and second moments and a step count per group.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Adam<R: Real> {
+    pub cfg: AdamConfig,
+    pub m: Gaussians<R>,
+    pub v: Gaussians<R>,
+    pub steps: [u64; N_GROUPS],
+}
+
+/// Precomputed per-group constants of one step.
+#[derive(Clone, Copy)]
+struct Consts<R: Real> {
+    on: bool,
+    b1: R,
+    b2: R,
+    omb1: R,
+    omb2: R,
+    step_size: R,
+    bc2_sqrt: R,
+    eps: R,
+}
+
+#[inline(always)]
+fn upd<R: Real>(c: &Consts<R>, p: &mut R, m: &mut R, v: &mut R, g: R) {
+    *m = c.b1 * *m + c.omb1 * g;
+    *v = c.b2 * *v + c.omb2 * g * g;
+    let denom = v.sqrt() / c.bc2_sqrt + c.eps;
+    *p -= c.step_size * (*m / denom);
+}
+
+/// Adam update of elements `range` of every row of one array-valued group.
+fn group_step<R: Real, const N: usize>(
+    c: &Consts<R>,
+    p: &mut [[R; N]],
+    m: &mut [[R; N]],
+    v: &mut [[R; N]],
+    g: &[[R; N]],
+    range: std::ops::Range<usize>,
+) {
+    if !c.on {
+        return;
+    }
+    p.par_chunks_mut(CHUNK)
+        .zip(m.par_chunks_mut(CHUNK))
+        .zip(v.par_chunks_mut(CHUNK))
+        .zip(g.par_chunks(CHUNK))
+        .for_each(|(((pc, mc), vc), gc)| {
+            for j in 0..pc.len() {
+                for a in range.clone() {
+                    upd(c, &mut pc[j][a], &mut mc[j][a], &mut vc[j][a], gc[j][a]);
+                }
+            }
+        });
+}
+
+impl<R: Real> Adam<R> {
+    /// Zero moments for `n` parameters.
+    pub fn new(cfg: AdamConfig, n: usize) -> Self {
+        Adam {
+            cfg,
+            m: Gaussians::zeros(n),
+            v: Gaussians::zeros(n),
+            steps: [0; N_GROUPS],
+        }
+    }
+
+    fn consts(&self, g: usize, lr: f64, on: bool) -> Consts<R> {
+        let t = (self.steps[g] + 1) as i32;
+        let c = &self.cfg;
+        let bc1 = 1.0 - c.beta1.powi(t);
+        let bc2 = 1.0 - c.beta2.powi(t);
+        Consts {
+            on,
+            b1: R::c(c.beta1),
+            b2: R::c(c.beta2),
+            omb1: R::c(1.0 - c.beta1),
+            omb2: R::c(1.0 - c.beta2),
+            step_size: R::c(lr / bc1),
+            bc2_sqrt: R::c(bc2.sqrt()),
+            eps: R::c(c.eps),
+        }
+    }
+
+    /// One Adam step of the groups with `active[g] == true`, learning rates `lr`.
+    /// Parallel over fixed chunks of Gaussians; each element is independent, so the result is
+    /// bit-identical for any thread count.
+    pub fn step(
+        &mut self,
+        p: &mut Gaussians<R>,
+        grad: &Gaussians<R>,
+        lr: &GroupLr,
+        active: &[bool; N_GROUPS],
+    ) {
+        let n = p.len();
+        assert!(
+            grad.len() == n && self.m.len() == n && self.v.len() == n,
+            "Adam: parameter, gradient and moment lengths differ"
+        );
+        let k: [Consts<R>; N_GROUPS] = std::array::from_fn(|g| self.consts(g, lr[g], active[g]));
+        let (m, v) = (&mut self.m, &mut self.v);
+        let kx = &k[Group::Xyz as usize];
+        group_step(
+            kx,
+            &mut p.means,
+            &mut m.means,
+            &mut v.means,
+            &grad.means,
+            0..3,
+        );
+        let ks = &k[Group::Scaling as usize];
+        let (ps, ms, vs) = (&mut p.log_scales, &mut m.log_scales, &mut v.log_scales);
+        group_step(ks, ps, ms, vs, &grad.log_scales, 0..3);
+        let kr = &k[Group::Rotation as usize];
+        group_step(
+            kr,
+            &mut p.quats,
+            &mut m.quats,
+            &mut v.quats,
+            &grad.quats,
+            0..4,
+        );
+        let ko = &k[Group::Opacity as usize];
+        let (po, mo, vo) = (
+            &mut p.opacity_logits,
+            &mut m.opacity_logits,
+            &mut v.opacity_logits,
+        );
+        if ko.on {
+            po.par_chunks_mut(CHUNK)
+                .zip(mo.par_chunks_mut(CHUNK))
+                .zip(vo.par_chunks_mut(CHUNK))
+                .zip(grad.opacity_logits.par_chunks(CHUNK))
+                .for_each(|(((pc, mc), vc), gc)| {
+                    for j in 0..pc.len() {
+                        upd(ko, &mut pc[j], &mut mc[j], &mut vc[j], gc[j]);
+                    }
+                });
+        }
+        let kd = &k[Group::FDc as usize];
+        let (pf, mf, vf) = (&mut p.features, &mut m.features, &mut v.features);
+        group_step(kd, pf, mf, vf, &grad.features, 0..1);
+        let kf = &k[Group::FRest as usize];
+        group_step(kf, pf, mf, vf, &grad.features, 1..N_FEATURES);
+        for g in 0..N_GROUPS {
+            if active[g] {
+                self.steps[g] += 1;
+            }
+        }
+    }
+
+    /// Zero the opacity moments (3DGS `reset_opacity` -> `replace_tensor_to_optimizer`).
+    pub fn zero_opacity_moments(&mut self) {
+        self.m
+            .opacity_logits
+            .iter_mut()
+            .for_each(|x| *x = R::zero());
+        self.v
+            .opacity_logits
+            .iter_mut()
+            .for_each(|x| *x = R::zero());
+    }
+}

@@ -2,3 +2,6 @@
 
 pub mod adam;
 pub mod schedule;
+
+pub use adam::{Adam, AdamConfig, Group, GroupLr, N_GROUPS};
+pub use schedule::ExponLr;

@@ -150,22 +150,273 @@ pub struct LabelMap {
     pub offset: [f64; 3],
 }
 
-/// Load a scalar volume, choosing the reader from the file name: `.nii`, `.nii.gz` (NIfTI),
-/// `.mha`, `.mhd` (MetaImage) or `.npy` ([x, y, z], 1 mm voxels unless a sidecar says otherwise).
-/// Values are returned as stored (NIfTI slope/intercept applied); no HU conversion.
+/// Load a scalar volume, choosing the reader from the file name: `.nii`, `.nii.gz` (NIfTI-1),
+/// `.mha`, `.mhd` (MetaImage) or `.npy` (a 3-D array indexed `[x, y, z]`, f32/f64/u8/i16,
+/// 1 mm voxels).
+///
+/// Conventions (see `notes/volumes.md`):
+/// - the file's array index (i, j, k) is our voxel (x, y, z) as is (x fastest); the file's own
+///   voxel-to-world affine (NIfTI sform/qform, MetaImage Offset/TransformMatrix) is recorded in
+///   [`Provenance::file_affine`] but not applied;
+/// - `offset` is 0: the volume is centred on the world origin (TIGRE/NAF placement);
+/// - values are returned as stored (NIfTI scl_slope/scl_inter applied); no HU conversion;
+/// - NaN or infinite voxels are *not* an error here (files may legitimately hold them, e.g.
+///   outside a reconstruction's field of view): callers that need finite values call
+///   [`Volume::check_finite`], which names the first bad voxel.
+///
+/// `provenance.source` is the path as given; `provenance.steps` records what the reader did.
 pub fn load(path: &std::path::Path) -> crate::error::Result<Volume<f32>> {
-    Err(crate::error::Error::format(
-        path,
-        "file",
-        "volume readers are not implemented yet",
-    ))
+    match format_of(path)? {
+        Format::Nifti => nifti::read(path),
+        Format::MetaImage => metaimage::read(path),
+        Format::Npy => read_npy(path),
+    }
 }
 
-/// Load a label volume (NIfTI or MetaImage) and round its values to label ids.
+/// Load a label volume (NIfTI or MetaImage) and round its values to label ids. A value that is
+/// negative, above 65535 or not finite is an error naming the file and the voxel.
 pub fn load_labels(path: &std::path::Path) -> crate::error::Result<LabelMap> {
+    let vol = match format_of(path)? {
+        Format::Nifti => nifti::read(path)?,
+        Format::MetaImage => metaimage::read(path)?,
+        Format::Npy => {
+            return Err(crate::error::Error::format(
+                path,
+                "file name",
+                "label volumes are read from NIfTI (.nii, .nii.gz) or MetaImage (.mha, .mhd)",
+            ))
+        }
+    };
+    let mut data = Vec::with_capacity(vol.data.len());
+    for (idx, &v) in vol.data.iter().enumerate() {
+        let r = (v as f64).round();
+        if !(v.is_finite() && (0.0..=65535.0).contains(&r)) {
+            let i = idx % vol.dims[0];
+            let j = (idx / vol.dims[0]) % vol.dims[1];
+            let k = idx / (vol.dims[0] * vol.dims[1]);
+            return Err(crate::error::Error::format(
+                path,
+                "data",
+                format!(
+                    "label voxel (i, j, k) = ({i}, {j}, {k}) holds {v}, which is not a label id \
+                     (ids are finite values in [0, 65535])"
+                ),
+            ));
+        }
+        data.push(r as u16);
+    }
+    Ok(LabelMap {
+        data,
+        dims: vol.dims,
+        spacing: vol.spacing,
+        offset: vol.offset,
+    })
+}
+
+/// The file formats [`load`] knows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Format {
+    Nifti,
+    MetaImage,
+    Npy,
+}
+
+/// The format of `path` from its file name (case-insensitive extension).
+fn format_of(path: &std::path::Path) -> crate::error::Result<Format> {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+        Ok(Format::Nifti)
+    } else if name.ends_with(".mha") || name.ends_with(".mhd") {
+        Ok(Format::MetaImage)
+    } else if name.ends_with(".npy") {
+        Ok(Format::Npy)
+    } else {
+        Err(crate::error::Error::format(
+            path,
+            "file name",
+            "unknown volume format: expected .nii, .nii.gz, .mha, .mhd or .npy",
+        ))
+    }
+}
+
+/// Read a whole file, naming it in the error.
+pub(crate) fn read_bytes(path: &std::path::Path) -> crate::error::Result<Vec<u8>> {
+    std::fs::read(path).map_err(|e| crate::error::Error::io(path, e))
+}
+
+/// Scalar element types shared by the readers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Elem {
+    U8,
+    I8,
+    U16,
+    I16,
+    U32,
+    I32,
+    U64,
+    I64,
+    F32,
+    F64,
+}
+
+impl Elem {
+    /// Bytes per element.
+    pub(crate) fn size(self) -> usize {
+        match self {
+            Elem::U8 | Elem::I8 => 1,
+            Elem::U16 | Elem::I16 => 2,
+            Elem::U32 | Elem::I32 | Elem::F32 => 4,
+            Elem::U64 | Elem::I64 | Elem::F64 => 8,
+        }
+    }
+    /// Short name (numpy-like) for provenance and messages.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Elem::U8 => "uint8",
+            Elem::I8 => "int8",
+            Elem::U16 => "uint16",
+            Elem::I16 => "int16",
+            Elem::U32 => "uint32",
+            Elem::I32 => "int32",
+            Elem::U64 => "uint64",
+            Elem::I64 => "int64",
+            Elem::F32 => "float32",
+            Elem::F64 => "float64",
+        }
+    }
+}
+
+/// Decode `bytes` (exactly `n * elem.size()` of them) to f32, applying `v * slope + inter` in f64
+/// when `scale` is given.
+pub(crate) fn decode(
+    bytes: &[u8],
+    elem: Elem,
+    big_endian: bool,
+    scale: Option<(f64, f64)>,
+) -> Vec<f32> {
+    macro_rules! dec {
+        ($t:ty, $n:expr) => {{
+            bytes
+                .chunks_exact($n)
+                .map(|c| {
+                    let mut a = [0u8; $n];
+                    a.copy_from_slice(c);
+                    let v = if big_endian {
+                        <$t>::from_be_bytes(a)
+                    } else {
+                        <$t>::from_le_bytes(a)
+                    };
+                    match scale {
+                        None => v as f32,
+                        Some((s, i)) => (v as f64 * s + i) as f32,
+                    }
+                })
+                .collect()
+        }};
+    }
+    match elem {
+        Elem::U8 => dec!(u8, 1),
+        Elem::I8 => dec!(i8, 1),
+        Elem::U16 => dec!(u16, 2),
+        Elem::I16 => dec!(i16, 2),
+        Elem::U32 => dec!(u32, 4),
+        Elem::I32 => dec!(i32, 4),
+        Elem::U64 => dec!(u64, 8),
+        Elem::I64 => dec!(i64, 8),
+        Elem::F32 => dec!(f32, 4),
+        Elem::F64 => dec!(f64, 8),
+    }
+}
+
+/// `n0 * n1 * n2 * size` with overflow reported as a format error of `field`.
+pub(crate) fn byte_count(
+    path: &std::path::Path,
+    field: &str,
+    dims: [usize; 3],
+    size: usize,
+) -> crate::error::Result<usize> {
+    dims.iter()
+        .try_fold(size, |acc, &d| acc.checked_mul(d))
+        .ok_or_else(|| {
+            crate::error::Error::format(
+                path,
+                field,
+                format!("{dims:?} voxels of {size} bytes overflow the address space"),
+            )
+        })
+}
+
+/// Read a `.npy` array `[x, y, z]` (f32, f64, u8 or i16; C or Fortran order) as a volume with
+/// 1 mm voxels.
+fn read_npy(path: &std::path::Path) -> crate::error::Result<Volume<f32>> {
+    use ndarray::Array3;
+    use ndarray_npy::{ReadNpyError, ReadNpyExt};
+    let bytes = read_bytes(path)?;
+    let fail = |e: ReadNpyError| {
+        let field = match &e {
+            ReadNpyError::ParseHeader(_) => "header",
+            ReadNpyError::WrongNdim(..) => "shape",
+            ReadNpyError::WrongDescriptor(_) => "descr",
+            _ => "data",
+        };
+        crate::error::Error::format(path, field, e.to_string())
+    };
+    // Try each supported dtype in turn; only a dtype mismatch moves on to the next.
+    type Attempt = Result<Option<(Vec<f32>, [usize; 3])>, ReadNpyError>;
+    fn attempt<T: ndarray_npy::ReadableElement + Copy>(
+        bytes: &[u8],
+        conv: fn(T) -> f32,
+    ) -> Attempt {
+        match Array3::<T>::read_npy(std::io::Cursor::new(bytes)) {
+            Ok(a) => {
+                let (nx, ny, nz) = a.dim();
+                // Reversing the axes gives [z, y, x]; its logical order is x fastest.
+                let t = a.reversed_axes();
+                let data: Vec<f32> = t.iter().map(|&v| conv(v)).collect();
+                Ok(Some((data, [nx, ny, nz])))
+            }
+            Err(ReadNpyError::WrongDescriptor(_)) => Ok(None),
+            Err(e) => Err(e),
+        }
+    }
+    type Try = fn(&[u8]) -> Attempt;
+    let tries: [(&str, Try); 4] = [
+        ("float32", |b| attempt::<f32>(b, |v| v)),
+        ("float64", |b| attempt::<f64>(b, |v| v as f32)),
+        ("uint8", |b| attempt::<u8>(b, |v| v as f32)),
+        ("int16", |b| attempt::<i16>(b, |v| v as f32)),
+    ];
+    for (name, f) in tries {
+        if let Some((data, dims)) = f(&bytes).map_err(fail)? {
+            if dims.contains(&0) {
+                return Err(crate::error::Error::format(
+                    path,
+                    "shape",
+                    format!("empty array of shape {dims:?}"),
+                ));
+            }
+            return Ok(Volume {
+                data,
+                dims,
+                spacing: [1.0; 3],
+                offset: [0.0; 3],
+                provenance: Provenance {
+                    source: path.display().to_string(),
+                    file_affine: None,
+                    steps: vec![format!(
+                        "read .npy {name} array [x, y, z] = {dims:?}; voxel size 1 mm assumed \
+                         (.npy carries none); centred (offset 0)"
+                    )],
+                },
+            });
+        }
+    }
     Err(crate::error::Error::format(
         path,
-        "file",
-        "label readers are not implemented yet",
+        "descr",
+        "unsupported dtype: .npy volumes must be float32, float64, uint8 or int16",
     ))
 }

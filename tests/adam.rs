@@ -1,0 +1,140 @@
+//! Adam against a hand computation (torch.optim.Adam, betas (0.9, 0.999), eps 1e-15).
+//!
+//! One parameter p0 = 1, gradients g1 = 0.5 then g2 = -0.25, lr = 0.1:
+//! - step 1: m = 0.05, v = 0.00025, bias corrections 0.1 and 0.001, so
+//!   p1 = 1 - (0.1 / 0.1) * 0.05 / (sqrt(0.00025) / sqrt(0.001)) = 1 - 0.05 / 0.5 = 0.9
+//!   (Adam's first step moves every element by exactly lr * sign(g));
+//! - step 2: m = 0.9 * 0.05 + 0.1 * (-0.25) = 0.02,
+//!   v = 0.999 * 0.00025 + 0.001 * 0.0625 = 0.00031225, bias corrections 0.19 and 0.001999, so
+//!   p2 = 0.9 - (0.1 / 0.19) * 0.02 / sqrt(0.00031225 / 0.001999) = 0.87336629603396.
+
+use unispine::gaussians::Gaussians;
+use unispine::optim::{Adam, AdamConfig, Group, N_GROUPS};
+
+fn one(v: f64) -> Gaussians<f64> {
+    let mut g = Gaussians::<f64>::zeros(1);
+    g.means[0] = [v; 3];
+    g.log_scales[0] = [v; 3];
+    g.quats[0] = [v; 4];
+    g.opacity_logits[0] = v;
+    g.features[0] = [v; 16];
+    g
+}
+
+fn all_values(g: &Gaussians<f64>) -> Vec<f64> {
+    let mut out = Vec::new();
+    out.extend(g.means[0]);
+    out.extend(g.log_scales[0]);
+    out.extend(g.quats[0]);
+    out.push(g.opacity_logits[0]);
+    out.extend(g.features[0]);
+    out
+}
+
+#[test]
+fn one_and_two_steps_match_the_hand_computation() {
+    let mut p = one(1.0);
+    let mut adam = Adam::<f64>::new(AdamConfig::default(), 1);
+    let lr = [0.1; N_GROUPS];
+    adam.step(&mut p, &one(0.5), &lr, &[true; N_GROUPS]);
+    for x in all_values(&p) {
+        assert!((x - 0.9).abs() < 1e-15, "step 1: {x}");
+    }
+    for x in all_values(&adam.m) {
+        assert!((x - 0.05).abs() < 1e-16);
+    }
+    for x in all_values(&adam.v) {
+        assert!((x - 0.00025).abs() < 1e-18 * 10.0);
+    }
+    adam.step(&mut p, &one(-0.25), &lr, &[true; N_GROUPS]);
+    for x in all_values(&p) {
+        assert!((x - 0.87336629603396).abs() < 1e-13, "step 2: {x}");
+    }
+    for x in all_values(&adam.m) {
+        assert!((x - 0.02).abs() < 1e-16 * 2.0);
+    }
+    for x in all_values(&adam.v) {
+        assert!((x - 0.00031225).abs() < 1e-18 * 10.0);
+    }
+    assert_eq!(adam.steps, [2; N_GROUPS]);
+}
+
+#[test]
+fn f32_follows_f64() {
+    let mut p64 = one(1.0);
+    let mut p32 = p64.cast::<f32>();
+    let mut a64 = Adam::<f64>::new(AdamConfig::default(), 1);
+    let mut a32 = Adam::<f32>::new(AdamConfig::default(), 1);
+    let lr = [0.1; N_GROUPS];
+    for g in [0.5, -0.25, 0.125] {
+        a64.step(&mut p64, &one(g), &lr, &[true; N_GROUPS]);
+        a32.step(&mut p32, &one(g).cast(), &lr, &[true; N_GROUPS]);
+    }
+    for (a, b) in all_values(&p64).iter().zip(all_values(&p32.cast())) {
+        assert!((a - b).abs() < 1e-6, "{a} vs {b}");
+    }
+}
+
+#[test]
+fn per_group_learning_rates_and_skipped_groups() {
+    // Groups: xyz, f_dc, f_rest, opacity, scaling, rotation. First step moves by exactly lr.
+    let lr = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+    let mut p = one(0.0);
+    let mut adam = Adam::<f64>::new(AdamConfig::default(), 1);
+    let mut active = [true; N_GROUPS];
+    active[Group::Opacity as usize] = false;
+    adam.step(&mut p, &one(1.0), &lr, &active);
+    // (1 - b1 rounds 0.1 to 0.09999999999999998 in f64: a few ulps.)
+    let close = |x: f64, y: f64| (x - y).abs() < 1e-14 * y.abs();
+    assert!(p.means[0].iter().all(|&x| close(x, -1.0)));
+    assert!(close(p.features[0][0], -2.0));
+    assert!(p.features[0][1..].iter().all(|&x| close(x, -3.0)));
+    assert_eq!(p.opacity_logits[0], 0.0, "skipped group must not move");
+    assert_eq!(
+        adam.m.opacity_logits[0], 0.0,
+        "skipped group keeps its moments"
+    );
+    assert!(p.log_scales[0].iter().all(|&x| close(x, -5.0)));
+    assert!(p.quats[0].iter().all(|&x| close(x, -6.0)));
+    assert_eq!(adam.steps, [1, 1, 1, 0, 1, 1]);
+    // Second step of the opacity group is its first: it moves by exactly lr again.
+    adam.step(&mut p, &one(1.0), &lr, &[true; N_GROUPS]);
+    assert!(close(p.opacity_logits[0], -4.0));
+    // The opacity reset zeroes its moments only.
+    adam.zero_opacity_moments();
+    assert_eq!(adam.m.opacity_logits[0], 0.0);
+    assert_eq!(adam.v.opacity_logits[0], 0.0);
+    assert!(adam.m.means[0][0] != 0.0);
+}
+
+#[test]
+fn thread_count_does_not_change_bits() {
+    let n = 10_007;
+    let mk = |s: f64| {
+        let mut g = Gaussians::<f32>::zeros(n);
+        for i in 0..n {
+            let x = ((i as f64 * 0.37 + s).sin()) as f32;
+            g.means[i] = [x, -x, 0.5 * x];
+            g.log_scales[i] = [x; 3];
+            g.quats[i] = [1.0, x, 0.0, -x];
+            g.opacity_logits[i] = x;
+            g.features[i] = [x; 16];
+        }
+        g
+    };
+    let run = |t: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut p = mk(0.0);
+            let mut a = Adam::<f32>::new(AdamConfig::default(), n);
+            for s in 1..4 {
+                a.step(&mut p, &mk(s as f64), &[1e-3; N_GROUPS], &[true; N_GROUPS]);
+            }
+            p
+        })
+    };
+    assert_eq!(run(1), run(2));
+}
