@@ -140,7 +140,7 @@ fn render_case(
     }
     let (w, h) = geo.image_size();
     let d_image: Vec<f64> = (0..w * h)
-        .map(|k| (((k * 37 + 11) % 97) as f64 / 97.0 - 0.45))
+        .map(|k| ((k * 37 + 11) % 97) as f64 / 97.0 - 0.45)
         .collect();
     json!({
         "equation": "Eqs. (4)-(5)",

@@ -43,6 +43,7 @@ fn scenes_stay_away_from_the_hard_cutoffs() {
 }
 
 #[test]
+#[allow(clippy::needless_range_loop)] // k indexes several per-group arrays
 fn every_group_matches_central_differences() {
     let mut worst: f64 = 0.0;
     for s in small_scenes() {

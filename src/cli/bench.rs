@@ -81,6 +81,17 @@ pub struct RenderTiming {
     pub forward_backward: f64,
     /// Blends (pixel, Gaussian pairs composited) of one forward pass.
     pub blends: u64,
+    /// Process CPU time (all threads) per forward + backward, s (Linux; None elsewhere). On a
+    /// shared machine this is less sensitive to other load than the wall time.
+    pub cpu_forward_backward: Option<f64>,
+}
+
+/// CPU time (user + system, all threads) of this process so far, s (Linux `/proc/self/stat`).
+pub fn process_cpu_seconds() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let f: Vec<&str> = s.rsplit(')').next()?.split_whitespace().collect();
+    let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -99,6 +110,7 @@ pub fn time_render(n: usize, size: usize, reps: usize) -> crate::Result<RenderTi
     let blends = saved.composite.blends;
     let mut fwd = Vec::new();
     let mut fb = Vec::new();
+    let cpu0 = process_cpu_seconds();
     for _ in 0..reps.max(1) {
         let t0 = Instant::now();
         let (img, saved) = render::forward(&g, &cam, &st)?;
@@ -109,12 +121,17 @@ pub fn time_render(n: usize, size: usize, reps: usize) -> crate::Result<RenderTi
         fwd.push((t1 - t0).as_secs_f64());
         fb.push((t2 - t0).as_secs_f64());
     }
+    let cpu = match (cpu0, process_cpu_seconds()) {
+        (Some(a), Some(b)) => Some((b - a) / reps.max(1) as f64),
+        _ => None,
+    };
     Ok(RenderTiming {
         gaussians: n,
         size,
         forward: median(fwd),
         forward_backward: median(fb),
         blends,
+        cpu_forward_backward: cpu,
     })
 }
 
@@ -179,11 +196,12 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
         naive_bps
     );
     println!(
-        "{:>9} {:>6} {:>11} {:>11} {:>12} {:>10} {:>13} {:>13} {:>10}",
+        "{:>9} {:>6} {:>11} {:>11} {:>11} {:>12} {:>10} {:>13} {:>13} {:>10}",
         "gaussians",
         "size",
         "forward ms",
         "fwd+bwd ms",
+        "f+b cpu ms",
         "blends",
         "blends/px",
         "fwd blends/s",
@@ -195,11 +213,13 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
             let t = time_render(n, size, args.reps)?;
             let fbps = t.blends as f64 / t.forward;
             println!(
-                "{:>9} {:>6} {:>11.2} {:>11.2} {:>12} {:>10.1} {:>13.3e} {:>13.3e} {:>10.1}",
+                "{:>9} {:>6} {:>11.2} {:>11.2} {:>11} {:>12} {:>10.1} {:>13.3e} {:>13.3e} {:>10.1}",
                 n,
                 size,
                 t.forward * 1e3,
                 t.forward_backward * 1e3,
+                t.cpu_forward_backward
+                    .map_or("-".to_string(), |c| format!("{:.1}", c * 1e3)),
                 t.blends,
                 t.blends as f64 / (size * size) as f64,
                 fbps,
@@ -208,6 +228,9 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
             );
         }
     }
-    println!("x naive = forward blends/s over the naive reference's blends/s");
+    println!(
+        "x naive = forward blends/s over the naive reference's blends/s; f+b cpu ms = process CPU \
+         time (all threads) per forward + backward (mean over the reps)"
+    );
     Ok(())
 }

@@ -83,54 +83,120 @@ struct Entry<R> {
     x1: u32,
     y0: u32,
     y1: u32,
+    /// f64 copies for the per-row chord of the ellipse A dx^2 + 2 B dx dy + C dy^2 <= 2 l:
+    /// (mx, my, A, B, 2 l A, det) (det = 0: no chord test).
+    chord: [f64; 6],
+}
+
+/// Which 8-column halves of tile row `row` (tile origin column `x0`) can hold a pixel with
+/// alpha >= 1/255 for entry `e`: those meeting the ellipse's chord on that row widened by one
+/// pixel (the same margin as the box). Outside it alpha < 1/255, so skipping a half changes
+/// no bit.
+#[inline(always)]
+fn halves<R>(e: &Entry<R>, row: usize, x0: usize) -> [bool; 2] {
+    let [mx, my, a, b, two_la, det] = e.chord;
+    if det <= 0.0 {
+        return [true, true];
+    }
+    let dy = row as f64 + 0.5 - my;
+    let disc = two_la - det * dy * dy;
+    if disc < 0.0 {
+        // The row misses the (log-margin widened) ellipse: alpha < 1/255 on all of it.
+        return [false, false];
+    }
+    let r = disc.sqrt() / a;
+    let c = mx - b * dy / a;
+    // Pixel centres col + 0.5 within [c - r - 1, c + r + 1].
+    let (lo, hi) = (c - r - 1.5, c + r + 0.5);
+    let w = [x0 as f64, x0 as f64 + 8.0, x0 as f64 + 16.0];
+    [
+        hi >= w[0] && lo <= w[1] - 1.0,
+        hi >= w[1] && lo <= w[2] - 1.0,
+    ]
+}
+
+/// Per-splat entry with its pixel box clipped to the image, or `None` when the splat cannot
+/// reach alpha >= 1/255 anywhere (not drawn, o < 1/255, or an empty box). Computed once per
+/// pass (parallel over splats, one packed record per splat so that the per-tile gathers touch
+/// one cache line per entry).
+fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Entry<R>>> {
+    let (w, h) = (bins.width as f64, bins.height as f64);
+    (0..s.radius.len())
+        .into_par_iter()
+        .map(|i| {
+            if !tiles::drawn(s, i) {
+                return None;
+            }
+            let o = s.opacity[i].f64();
+            // alpha <= o G <= o: nothing to draw unless o >= 1/255 (up to the margin).
+            let l = (255.0 * o).ln() + BOX_LOG_MARGIN;
+            // Positive phrasing so that NaN fails.
+            #[allow(clippy::neg_cmp_op_on_partial_ord)]
+            if !(l > 0.0) {
+                return None;
+            }
+            let [a, b, c] = s.conic[i].map(|x| x.f64());
+            let [mx, my] = s.mean2d[i].map(|x| x.f64());
+            // {d : d^T Q d <= 2 l} has half-widths sqrt(2 l (Q^-1)_00), sqrt(2 l (Q^-1)_11).
+            let det = a * c - b * b;
+            let ok = det > 0.0 && det.is_finite();
+            let (hx, hy) = if ok {
+                ((2.0 * l * c / det).sqrt(), (2.0 * l * a / det).sqrt())
+            } else {
+                (f64::INFINITY, f64::INFINITY)
+            };
+            // Pixel centres col + 0.5 within [mx - hx - 1, mx + hx + 1].
+            let x0 = (mx - hx - 1.5).ceil().max(0.0);
+            let x1 = ((mx + hx + 0.5).floor() + 1.0).min(w);
+            let y0 = (my - hy - 1.5).ceil().max(0.0);
+            let y1 = ((my + hy + 0.5).floor() + 1.0).min(h);
+            if !(x0 < x1 && y0 < y1) {
+                return None;
+            }
+            Some(Entry {
+                id: i as u32,
+                mx: s.mean2d[i][0],
+                my: s.mean2d[i][1],
+                a: s.conic[i][0],
+                b: s.conic[i][1],
+                c: s.conic[i][2],
+                o: s.opacity[i],
+                col: s.color[i],
+                x0: x0 as u32,
+                x1: x1 as u32,
+                y0: y0 as u32,
+                y1: y1 as u32,
+                chord: if ok {
+                    [mx, my, a, b, 2.0 * l * a, det]
+                } else {
+                    [mx, my, a, b, 0.0, 0.0]
+                },
+            })
+        })
+        .collect()
 }
 
 /// The work list of tile `t`: its splats in depth order, each with the box of pixels where it
-/// can reach alpha >= 1/255. Entries that reach no pixel of the tile are dropped. Forward and
-/// backward build the same list.
-fn tile_entries<R: Real>(s: &Splats<R>, bins: &TileBins, t: usize) -> Vec<Entry<R>> {
-    let [rx0, rx1, ry0, ry1] = bins.pixel_rect(t).map(|x| x as f64);
+/// can reach alpha >= 1/255 clipped to the tile. Entries that reach no pixel of the tile are
+/// dropped. Forward and backward build the same list.
+fn tile_entries<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize) -> Vec<Entry<R>> {
+    let [rx0, rx1, ry0, ry1] = bins.pixel_rect(t).map(|x| x as u32);
     let list = bins.list(t);
     let mut out = Vec::with_capacity(list.len());
     for &id in list {
-        let i = id as usize;
-        let o = s.opacity[i].f64();
-        // alpha <= o G <= o: nothing to draw unless o >= 1/255 (up to the margin).
-        let l = (255.0 * o).ln() + BOX_LOG_MARGIN;
-        if !(l > 0.0) {
-            continue;
+        if let Some(e) = &packed[id as usize] {
+            let (x0, x1) = (e.x0.max(rx0), e.x1.min(rx1));
+            let (y0, y1) = (e.y0.max(ry0), e.y1.min(ry1));
+            if x0 < x1 && y0 < y1 {
+                out.push(Entry {
+                    x0,
+                    x1,
+                    y0,
+                    y1,
+                    ..*e
+                });
+            }
         }
-        let [a, b, c] = s.conic[i].map(|x| x.f64());
-        let [mx, my] = s.mean2d[i].map(|x| x.f64());
-        // {d : d^T Q d <= 2 l} has half-widths sqrt(2 l (Q^-1)_00), sqrt(2 l (Q^-1)_11).
-        let det = a * c - b * b;
-        let (hx, hy) = if det > 0.0 && det.is_finite() {
-            ((2.0 * l * c / det).sqrt(), (2.0 * l * a / det).sqrt())
-        } else {
-            (f64::INFINITY, f64::INFINITY)
-        };
-        // Pixel centres col + 0.5 within [mx - hx - 1, mx + hx + 1].
-        let x0 = (mx - hx - 1.5).ceil().max(rx0);
-        let x1 = ((mx + hx + 0.5).floor() + 1.0).min(rx1);
-        let y0 = (my - hy - 1.5).ceil().max(ry0);
-        let y1 = ((my + hy + 0.5).floor() + 1.0).min(ry1);
-        if !(x0 < x1 && y0 < y1) {
-            continue;
-        }
-        out.push(Entry {
-            id,
-            mx: s.mean2d[i][0],
-            my: s.mean2d[i][1],
-            a: s.conic[i][0],
-            b: s.conic[i][1],
-            c: s.conic[i][2],
-            o: s.opacity[i],
-            col: s.color[i],
-            x0: x0 as u32,
-            x1: x1 as u32,
-            y0: y0 as u32,
-            y1: y1 as u32,
-        });
     }
     out
 }
@@ -211,7 +277,7 @@ struct TileOut<R> {
 }
 
 #[inline(always)]
-fn forward_tile<R: Real>(s: &Splats<R>, bins: &TileBins, t: usize) -> TileOut<R> {
+fn forward_tile<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize) -> TileOut<R> {
     let [x0, x1, y0, y1] = bins.pixel_rect(t);
     let npix = ((x1 - x0) * (y1 - y0)) as u32;
     let mut out = TileOut {
@@ -230,7 +296,7 @@ fn forward_tile<R: Real>(s: &Splats<R>, bins: &TileBins, t: usize) -> TileOut<R>
     let half = R::c(0.5);
     // Pixel-centre x coordinates of the tile's columns.
     let xs: [R; TILE] = std::array::from_fn(|k| R::c((x0 + k) as f64) + half);
-    let entries = tile_entries(s, bins, t);
+    let entries = tile_entries(packed, bins, t);
     for (j, e) in entries.iter().enumerate() {
         if n_done == npix {
             break;
@@ -244,32 +310,41 @@ fn forward_tile<R: Real>(s: &Splats<R>, bins: &TileBins, t: usize) -> TileOut<R>
             }
             let dy = R::c(row as f64) + half - e.my;
             let base = (row - y0) * TILE;
-            let tr: &mut [R; TILE] = (&mut out.t[base..base + TILE]).try_into().unwrap();
-            let cr: &mut [R; TILE] = (&mut out.color[base..base + TILE]).try_into().unwrap();
-            let lr: &mut [u32; TILE] = (&mut out.last[base..base + TILE]).try_into().unwrap();
-            let dr: &mut [u32; TILE] = (&mut done[base..base + TILE]).try_into().unwrap();
-            // Branch-free over all 16 columns of the row (vectorises; columns outside the
-            // entry's box are masked out); selects reproduce the sequential skip / stop /
-            // blend logic exactly.
+            let hv = halves(e, row, x0);
             let mut nb = 0u32;
             let mut nd = 0u32;
-            for k in 0..TILE {
-                let dx = xs[k] - e.mx;
-                let pw = power_of(e.a, e.b, e.c, dx, dy);
-                let og = e.o * exp_k(pw);
-                let alpha = sel(mask(og > amax), amax, og);
-                let tt = tr[k];
-                let next = tt * (one - alpha);
-                let valid = colm[k] & !dr[k] & mask(pw <= R::zero()) & mask(alpha >= amin);
-                let stop = valid & mask(next < tmin);
-                let blend = valid & !stop;
-                let c_new = cr[k] + e.col * alpha * tt;
-                cr[k] = sel(blend, c_new, cr[k]);
-                tr[k] = sel(blend, next, tt);
-                lr[k] = (tag & blend) | (lr[k] & !blend);
-                dr[k] |= stop;
-                nb += blend & 1;
-                nd += stop & 1;
+            for h in 0..2 {
+                if !hv[h] {
+                    continue;
+                }
+                let o8 = base + 8 * h;
+                let tr: &mut [R; 8] = (&mut out.t[o8..o8 + 8]).try_into().unwrap();
+                let cr: &mut [R; 8] = (&mut out.color[o8..o8 + 8]).try_into().unwrap();
+                let lr: &mut [u32; 8] = (&mut out.last[o8..o8 + 8]).try_into().unwrap();
+                let dr: &mut [u32; 8] = (&mut done[o8..o8 + 8]).try_into().unwrap();
+                let xh: &[R; 8] = xs[8 * h..8 * h + 8].try_into().unwrap();
+                let ch: &[u32; 8] = colm[8 * h..8 * h + 8].try_into().unwrap();
+                // Branch-free over the 8 columns (vectorises; columns outside the entry's box
+                // are masked out); selects reproduce the sequential skip / stop / blend logic
+                // exactly.
+                for k in 0..8 {
+                    let dx = xh[k] - e.mx;
+                    let pw = power_of(e.a, e.b, e.c, dx, dy);
+                    let og = e.o * exp_k(pw);
+                    let alpha = sel(mask(og > amax), amax, og);
+                    let tt = tr[k];
+                    let next = tt * (one - alpha);
+                    let valid = ch[k] & !dr[k] & mask(pw <= R::zero()) & mask(alpha >= amin);
+                    let stop = valid & mask(next < tmin);
+                    let blend = valid & !stop;
+                    let c_new = cr[k] + e.col * alpha * tt;
+                    cr[k] = sel(blend, c_new, cr[k]);
+                    tr[k] = sel(blend, next, tt);
+                    lr[k] = (tag & blend) | (lr[k] & !blend);
+                    dr[k] |= stop;
+                    nb += blend & 1;
+                    nd += stop & 1;
+                }
             }
             out.blends += nb as u64;
             n_done += nd;
@@ -290,9 +365,10 @@ pub fn forward<R: Real>(
     background: R,
 ) -> (Image2d<R>, CompositeSaved<R>) {
     let bins = tiles::bin(splats, width, height);
+    let packed = pack(splats, &bins);
     let outs: Vec<TileOut<R>> = (0..bins.n_tiles())
         .into_par_iter()
-        .map(|t| dispatch::forward_tile(splats, &bins, t))
+        .map(|t| dispatch::forward_tile(&packed, &bins, t))
         .collect();
     let mut img = Image2d::filled(width, height, R::zero());
     let mut final_t = vec![R::one(); width * height];
@@ -356,7 +432,11 @@ pub fn validate<R: Real>(splats: &Splats<R>) -> crate::error::Result<()> {
 mod dispatch {
     use super::*;
 
-    pub(super) fn forward_tile<R: Real>(s: &Splats<R>, bins: &TileBins, t: usize) -> TileOut<R> {
+    pub(super) fn forward_tile<R: Real>(
+        s: &[Option<Entry<R>>],
+        bins: &TileBins,
+        t: usize,
+    ) -> TileOut<R> {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked above).
@@ -367,12 +447,16 @@ mod dispatch {
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn forward_tile_avx2<R: Real>(s: &Splats<R>, bins: &TileBins, t: usize) -> TileOut<R> {
+    unsafe fn forward_tile_avx2<R: Real>(
+        s: &[Option<Entry<R>>],
+        bins: &TileBins,
+        t: usize,
+    ) -> TileOut<R> {
         super::forward_tile(s, bins, t)
     }
 
     pub(super) fn backward_tile<R: Real>(
-        s: &Splats<R>,
+        s: &[Option<Entry<R>>],
         saved: &CompositeSaved<R>,
         d_image: &Image2d<R>,
         t: usize,
@@ -388,7 +472,7 @@ mod dispatch {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn backward_tile_avx2<R: Real>(
-        s: &Splats<R>,
+        s: &[Option<Entry<R>>],
         saved: &CompositeSaved<R>,
         d_image: &Image2d<R>,
         t: usize,
@@ -402,7 +486,7 @@ type Rec<R> = (u32, [R; 7]);
 
 #[inline(always)]
 fn backward_tile<R: Real>(
-    s: &Splats<R>,
+    packed: &[Option<Entry<R>>],
     saved: &CompositeSaved<R>,
     d_image: &Image2d<R>,
     t: usize,
@@ -433,7 +517,7 @@ fn backward_tile<R: Real>(
     if max_last == 0 {
         return Vec::new();
     }
-    let entries = tile_entries(s, bins, t);
+    let entries = tile_entries(packed, bins, t);
     let (amax, amin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN));
     let one = R::one();
     let zero = R::zero();
@@ -459,37 +543,52 @@ fn backward_tile<R: Real>(
             }
             let dy = R::c(row as f64) + half - e.my;
             let base = (row - y0) * TILE;
-            let r = base..base + TILE;
-            let tc: &mut [R; TILE] = (&mut tcur[r.clone()]).try_into().unwrap();
-            let tf: &[R; TILE] = (&tfin[r.clone()]).try_into().unwrap();
-            let bh: &mut [R; TILE] = (&mut behind[r.clone()]).try_into().unwrap();
-            let gr: &[R; TILE] = (&g[r.clone()]).try_into().unwrap();
-            let lr: &[u32; TILE] = (&last[r]).try_into().unwrap();
-            let [l0, l1, l2, l3, l4, l5, l6] = &mut lanes;
-            for k in 0..TILE {
-                let dx = xs[k] - e.mx;
-                let pw = power_of(e.a, e.b, e.c, dx, dy);
-                let gk = exp_k(pw);
-                let og = e.o * gk;
-                let alpha = sel(mask(og > amax), amax, og);
-                let valid = colm[k] & mask(ju < lr[k]) & mask(pw <= zero) & mask(alpha >= amin);
-                let om = one - alpha;
-                let tk = tc[k] / om;
-                let gp = gr[k];
-                let d_alpha = gp * (e.col * tk - bh[k] / om) - gp * bg * tf[k] / om;
-                bh[k] = sel(valid, bh[k] + e.col * alpha * tk, bh[k]);
-                tc[k] = sel(valid, tk, tc[k]);
-                l6[k] = sel(valid, l6[k] + gp * alpha * tk, l6[k]);
-                // Clamp active (o G > 0.99): d alpha / d (o G) = 0.
-                let live = valid & mask(og <= amax);
-                let d_pw = og * d_alpha;
-                l5[k] = sel(live, l5[k] + gk * d_alpha, l5[k]);
-                l0[k] = sel(live, l0[k] + d_pw * (e.a * dx + e.b * dy), l0[k]);
-                l1[k] = sel(live, l1[k] + d_pw * (e.b * dx + e.c * dy), l1[k]);
-                l2[k] = sel(live, l2[k] - half * dx * dx * d_pw, l2[k]);
-                l3[k] = sel(live, l3[k] - dx * dy * d_pw, l3[k]);
-                l4[k] = sel(live, l4[k] - half * dy * dy * d_pw, l4[k]);
-                any |= valid;
+            let hv = halves(e, row, x0);
+            for h in 0..2 {
+                if !hv[h] {
+                    continue;
+                }
+                let r = base + 8 * h..base + 8 * h + 8;
+                let tc: &mut [R; 8] = (&mut tcur[r.clone()]).try_into().unwrap();
+                let tf: &[R; 8] = (&tfin[r.clone()]).try_into().unwrap();
+                let bh: &mut [R; 8] = (&mut behind[r.clone()]).try_into().unwrap();
+                let gr: &[R; 8] = (&g[r.clone()]).try_into().unwrap();
+                let lr: &[u32; 8] = (&last[r]).try_into().unwrap();
+                let xh: &[R; 8] = xs[8 * h..8 * h + 8].try_into().unwrap();
+                let ch: &[u32; 8] = colm[8 * h..8 * h + 8].try_into().unwrap();
+                let [l0, l1, l2, l3, l4, l5, l6] = &mut lanes;
+                let l0: &mut [R; 8] = (&mut l0[8 * h..8 * h + 8]).try_into().unwrap();
+                let l1: &mut [R; 8] = (&mut l1[8 * h..8 * h + 8]).try_into().unwrap();
+                let l2: &mut [R; 8] = (&mut l2[8 * h..8 * h + 8]).try_into().unwrap();
+                let l3: &mut [R; 8] = (&mut l3[8 * h..8 * h + 8]).try_into().unwrap();
+                let l4: &mut [R; 8] = (&mut l4[8 * h..8 * h + 8]).try_into().unwrap();
+                let l5: &mut [R; 8] = (&mut l5[8 * h..8 * h + 8]).try_into().unwrap();
+                let l6: &mut [R; 8] = (&mut l6[8 * h..8 * h + 8]).try_into().unwrap();
+                for k in 0..8 {
+                    let dx = xh[k] - e.mx;
+                    let pw = power_of(e.a, e.b, e.c, dx, dy);
+                    let gk = exp_k(pw);
+                    let og = e.o * gk;
+                    let alpha = sel(mask(og > amax), amax, og);
+                    let valid = ch[k] & mask(ju < lr[k]) & mask(pw <= zero) & mask(alpha >= amin);
+                    let inv = one / (one - alpha);
+                    let tk = tc[k] * inv;
+                    let gp = gr[k];
+                    let d_alpha = gp * (e.col * tk - bh[k] * inv) - gp * bg * tf[k] * inv;
+                    bh[k] = sel(valid, bh[k] + e.col * alpha * tk, bh[k]);
+                    tc[k] = sel(valid, tk, tc[k]);
+                    l6[k] = sel(valid, l6[k] + gp * alpha * tk, l6[k]);
+                    // Clamp active (o G > 0.99): d alpha / d (o G) = 0.
+                    let live = valid & mask(og <= amax);
+                    let d_pw = og * d_alpha;
+                    l5[k] = sel(live, l5[k] + gk * d_alpha, l5[k]);
+                    l0[k] = sel(live, l0[k] + d_pw * (e.a * dx + e.b * dy), l0[k]);
+                    l1[k] = sel(live, l1[k] + d_pw * (e.b * dx + e.c * dy), l1[k]);
+                    l2[k] = sel(live, l2[k] - half * dx * dx * d_pw, l2[k]);
+                    l3[k] = sel(live, l3[k] - dx * dy * d_pw, l3[k]);
+                    l4[k] = sel(live, l4[k] - half * dy * dy * d_pw, l4[k]);
+                    any |= valid;
+                }
             }
         }
         if any > 0 {
@@ -519,9 +618,10 @@ pub fn backward<R: Real>(
         (saved.bins.width, saved.bins.height),
         "d_image has the size of the rendered image"
     );
+    let packed = pack(splats, &saved.bins);
     let recs: Vec<Vec<Rec<R>>> = (0..saved.bins.n_tiles())
         .into_par_iter()
-        .map(|t| dispatch::backward_tile(splats, saved, d_image, t))
+        .map(|t| dispatch::backward_tile(&packed, saved, d_image, t))
         .collect();
     let mut out = SplatGrads {
         mean2d: vec![[R::zero(); 2]; n],
@@ -614,9 +714,10 @@ mod tests;
 /// Number of (pixel, splat) evaluations the kernels may perform: the sum over tiles of the
 /// pixel boxes of their work lists (an upper bound; done pixels and rows are skipped).
 pub fn box_pixels<R: Real>(splats: &Splats<R>, bins: &TileBins) -> u64 {
+    let packed = pack(splats, bins);
     (0..bins.n_tiles())
         .map(|t| {
-            tile_entries(splats, bins, t)
+            tile_entries(&packed, bins, t)
                 .iter()
                 .map(|e| ((e.x1 - e.x0) * (e.y1 - e.y0)) as u64)
                 .sum::<u64>()
