@@ -154,7 +154,7 @@ pub struct LabelMap {
 /// `.mha`, `.mhd` (MetaImage) or `.npy` (a 3-D array indexed `[x, y, z]`, f32/f64/u8/i16,
 /// 1 mm voxels).
 ///
-/// Conventions (see `notes/volumes.md`):
+/// Conventions (see paper_notes.md):
 /// - the file's array index (i, j, k) is our voxel (x, y, z) as is (x fastest); the file's own
 ///   voxel-to-world affine (NIfTI sform/qform, MetaImage Offset/TransformMatrix) is recorded in
 ///   [`Provenance::file_affine`] but not applied;
