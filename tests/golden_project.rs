@@ -11,8 +11,10 @@
 //! Regenerate the files: `UNISPINE_REGEN_GOLDEN=1 cargo test --release --test golden_project`
 //! (then run `python3 tools/golden_reference.py` and commit).
 
-use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+mod common;
+use common::golden::*;
+
+use std::path::Path;
 
 use serde_json::{json, Value};
 use unispine::gaussians::model::N_FEATURES;
@@ -25,76 +27,7 @@ use unispine::render::{ColorMode, RenderSettings};
 const TOL: f64 = 1e-10;
 const ACTIVE: [usize; 4] = [1, 4, 9, 16];
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
 // ---------------------------------------------------------------- JSON helpers
-
-/// `{"shape": [...], "data": [flat row-major]}`.
-fn arr(shape: &[usize], data: Vec<f64>) -> Value {
-    assert_eq!(shape.iter().product::<usize>(), data.len());
-    json!({ "shape": shape, "data": data })
-}
-
-fn get_arr(v: &Value, key: &str) -> (Vec<usize>, Vec<f64>) {
-    let a = &v[key];
-    let shape = a["shape"]
-        .as_array()
-        .unwrap_or_else(|| panic!("`{key}` has no shape"))
-        .iter()
-        .map(|x| x.as_u64().unwrap() as usize)
-        .collect();
-    let data = a["data"]
-        .as_array()
-        .unwrap_or_else(|| panic!("`{key}` has no data"))
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect();
-    (shape, data)
-}
-
-fn rows<const N: usize>(v: &Value, key: &str) -> Vec<[f64; N]> {
-    let (shape, data) = get_arr(v, key);
-    assert_eq!(*shape.last().unwrap(), N, "`{key}` shape {shape:?}");
-    data.chunks(N)
-        .map(|c| std::array::from_fn(|k| c[k]))
-        .collect()
-}
-
-/// JSON text with every float written with 17 significant digits.
-fn write_value(out: &mut String, v: &Value, indent: usize) {
-    let pad = "  ".repeat(indent);
-    match v {
-        Value::Null | Value::Bool(_) | Value::String(_) => out.push_str(&v.to_string()),
-        Value::Number(n) => {
-            if let Some(i) = n.as_i64() {
-                write!(out, "{i}").unwrap();
-            } else {
-                write!(out, "{:.16e}", n.as_f64().unwrap()).unwrap();
-            }
-        }
-        Value::Array(a) => {
-            out.push('[');
-            for (k, x) in a.iter().enumerate() {
-                if k > 0 {
-                    out.push_str(", ");
-                }
-                write_value(out, x, indent + 1);
-            }
-            out.push(']');
-        }
-        Value::Object(m) => {
-            out.push_str("{\n");
-            for (k, (key, x)) in m.iter().enumerate() {
-                write!(out, "{pad}  {}: ", Value::String(key.clone())).unwrap();
-                write_value(out, x, indent + 1);
-                out.push_str(if k + 1 < m.len() { ",\n" } else { "\n" });
-            }
-            write!(out, "{pad}}}").unwrap();
-        }
-    }
-}
 
 // ---------------------------------------------------------------- the cases
 
