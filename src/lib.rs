@@ -21,19 +21,44 @@ pub mod math;
 pub mod par;
 pub mod real;
 
-// The pipeline, in data-flow order.
-pub mod dataset;
-pub mod densify;
-pub mod drr;
-pub mod eval;
-pub mod gaussians;
-pub mod geometry;
-pub mod loss;
-pub mod optim;
-pub mod render;
-pub mod report;
-pub mod train;
+// The pipeline, in data-flow order (one stage per module).
+
+/// Volumes: NIfTI / MetaImage / npy readers, HU conversion, crop, resampling, the phantom and
+/// the ultrasound-like proxy.
 pub mod volume;
+
+/// TIGRE cone-beam geometry and the per-angle camera.
+pub mod geometry;
+
+/// Our DRR ray-marchers (Siddon, trilinear).
+pub mod drr;
+
+/// Projection datasets: generation with the paper protocol, storage, pickle import.
+pub mod dataset;
+
+/// Radiative Gaussians (Eq. 1), RIRF (Eq. 2), ACUI initialisation, PLY.
+pub mod gaussians;
+
+/// The differentiable tile rasterizer (Eqs. 3-5), forward and backward.
+pub mod render;
+
+/// SPWM (Eqs. 6-7), Charbonnier / weighted Charbonnier, SSIM, the hybrid loss (Eqs. 8-9).
+pub mod loss;
+
+/// Adam and learning-rate schedules.
+pub mod optim;
+
+/// Adaptive density control: clone, split, prune, opacity reset.
+pub mod densify;
+
+/// Method presets and the training loop.
+pub mod train;
+
+/// Evaluation: PSNR, SSIM, fps.
+pub mod eval;
+
+/// Tables of finished runs.
+pub mod report;
 
 // Front end.
 pub mod cli;
