@@ -33,5 +33,7 @@ python_free_summary() {
     grep -E '"(test_psnr|test_ssim|n_gaussians|train_time_s|render_fps)"' "$1" | sed 's/^ */  /'
 }
 python_free_summary "$DIR/run-$METHOD/metrics.json"
+"$BIN" report "$DIR/run-$METHOD" --charts "$DIR/charts" > "$DIR/report.md"
 echo "outputs: $DIR/run-$METHOD (config.json, metrics.json, log.csv, model.ply, previews/*.png)"
 echo "dataset: $DIR/phantom"
+echo "report:  $DIR/report.md, charts: $DIR/charts/{tradeoff,curves}.svg"

@@ -4,7 +4,7 @@
 use std::process::Command;
 
 use unispine::render::RenderSettings;
-use unispine::train::Metrics;
+use unispine::train::{EvalPoint, Metrics};
 
 fn metrics(method: &str, psnr: f64, n: usize) -> Metrics {
     Metrics {
@@ -73,4 +73,90 @@ fn report_prints_one_row_per_run_and_names_missing_files() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("metrics.json"), "{err}");
+}
+
+/// `--charts DIR` writes tradeoff.svg (one marker per run in each panel, placed by value) and
+/// curves.svg (three panels with one line per run); a malformed log.csv is an error naming the
+/// file and the line.
+#[test]
+fn report_charts_place_runs_by_value_and_name_bad_logs() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut a = metrics("unispine", 38.0, 100);
+    a.train_time_s = 50.0;
+    let mut b = metrics("3dgs", 34.0, 200);
+    b.train_time_s = 100.0;
+    for (m, psnr) in [(&mut a, 38.0), (&mut b, 34.0)] {
+        m.evals = [(100, psnr - 10.0), (300, psnr)]
+            .map(|(iteration, psnr)| EvalPoint {
+                iteration,
+                psnr,
+                ssim: 0.9,
+                n_gaussians: 300,
+            })
+            .to_vec();
+    }
+    for (name, m) in [("a", &a), ("b", &b)] {
+        let d = dir.path().join(name);
+        std::fs::create_dir_all(&d).unwrap();
+        std::fs::write(d.join("metrics.json"), serde_json::to_string(m).unwrap()).unwrap();
+        let mut log = String::from("iteration,view,loss,data,ssim,psnr,n_gaussians,seconds\n");
+        for it in 1..=300 {
+            log += &format!(
+                "{it},0,0.1,0.1,0.9,{},{},0.1\n",
+                20.0 + it as f64 / 30.0,
+                50 + it
+            );
+        }
+        std::fs::write(d.join("log.csv"), log).unwrap();
+    }
+    let charts = dir.path().join("charts");
+    let run = |args: &[&std::path::Path]| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_unispine"));
+        c.arg("report");
+        for a in args {
+            c.arg(a);
+        }
+        c.arg("--charts").arg(&charts).output().unwrap()
+    };
+    let out = run(&[&dir.path().join("a"), &dir.path().join("b")]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    let tradeoff = std::fs::read_to_string(charts.join("tradeoff.svg")).unwrap();
+    assert!(tradeoff.starts_with("<svg"));
+    let markers: Vec<(f64, f64)> = tradeoff
+        .lines()
+        .filter(|l| l.contains(r#"class="marker""#))
+        .map(|l| {
+            let num = |key: &str| -> f64 {
+                let i = l.find(key).unwrap() + key.len();
+                l[i..].split('"').next().unwrap().parse().unwrap()
+            };
+            (num("cx=\""), num("cy=\""))
+        })
+        .collect();
+    // Two panels (time, fps) x two runs; in the time panel run b is slower (right) and worse (lower).
+    assert_eq!(markers.len(), 4, "{tradeoff}");
+    assert!(markers[1].0 > markers[0].0 && markers[1].1 > markers[0].1);
+    assert!(tradeoff.contains("a (unispine)") && tradeoff.contains("b (3dgs)"));
+
+    let curves = std::fs::read_to_string(charts.join("curves.svg")).unwrap();
+    assert_eq!(
+        curves.matches("<polyline").count(),
+        6,
+        "three panels x two runs"
+    );
+
+    std::fs::write(
+        dir.path().join("b/log.csv"),
+        "iteration,view,loss,data,ssim,psnr,n_gaussians,seconds\n1,0,0.1,0.1,0.9,oops,3,0.1\n",
+    )
+    .unwrap();
+    let out = run(&[&dir.path().join("b")]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("log.csv") && err.contains("line 2"), "{err}");
 }

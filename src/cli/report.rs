@@ -1,5 +1,5 @@
 //! `unispine report RUN...`: one markdown table comparing finished runs, read from their
-//! `metrics.json` files (nothing is recomputed).
+//! `metrics.json` files (nothing is recomputed), and optionally two SVG charts.
 
 use std::path::PathBuf;
 
@@ -14,6 +14,11 @@ pub struct ReportArgs {
     /// Also write the table to this file.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Also write two SVG charts into this folder: `tradeoff.svg` (test PSNR against training
+    /// time and against render fps) and `curves.svg` (training PSNR, test PSNR and Gaussian
+    /// count against iteration, from each run's `log.csv`).
+    #[arg(long)]
+    pub charts: Option<PathBuf>,
 }
 
 /// Print (and optionally write) the table.
@@ -22,6 +27,18 @@ pub fn run(a: ReportArgs) -> anyhow::Result<()> {
     print!("{table}");
     if let Some(p) = a.out {
         std::fs::write(&p, &table).with_context(|| format!("{}: cannot write", p.display()))?;
+    }
+    if let Some(dir) = a.charts {
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        for (name, svg) in [
+            ("tradeoff.svg", crate::report::tradeoff_chart(&a.runs)?),
+            ("curves.svg", crate::report::curves_chart(&a.runs)?),
+        ] {
+            let p = dir.join(name);
+            std::fs::write(&p, svg).with_context(|| format!("{}: cannot write", p.display()))?;
+            eprintln!("wrote {}", p.display());
+        }
     }
     Ok(())
 }

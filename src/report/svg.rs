@@ -1,0 +1,392 @@
+//! A minimal SVG plot writer (axes, ticks, polylines, labelled markers, legend) so that charts
+//! need no font files and no system libraries. Coordinates are data units; each panel maps them
+//! linearly (or log10 on the y axis) into its box.
+
+use std::fmt::Write as _;
+
+/// Colours for series, in order (colour-blind-safe Okabe-Ito palette).
+pub const PALETTE: [&str; 8] = [
+    "#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#F0E442", "#000000",
+];
+
+/// One line series.
+#[derive(Clone, Debug)]
+pub struct Line {
+    pub label: String,
+    pub points: Vec<(f64, f64)>,
+}
+
+/// One labelled marker.
+#[derive(Clone, Debug)]
+pub struct Marker {
+    pub label: String,
+    pub x: f64,
+    pub y: f64,
+    /// Index into [`PALETTE`] (modulo its length).
+    pub colour: usize,
+}
+
+/// One panel: title, axis labels, lines and markers.
+#[derive(Clone, Debug, Default)]
+pub struct Panel {
+    pub title: String,
+    pub x_label: String,
+    pub y_label: String,
+    pub log_y: bool,
+    pub lines: Vec<Line>,
+    pub markers: Vec<Marker>,
+}
+
+const PANEL_W: f64 = 520.0;
+const PANEL_H: f64 = 380.0;
+const MARGIN_L: f64 = 70.0;
+const MARGIN_R: f64 = 20.0;
+const MARGIN_T: f64 = 36.0;
+const MARGIN_B: f64 = 56.0;
+
+/// Escape text for an SVG text node or attribute.
+pub fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// "Nice" tick positions covering [lo, hi]: steps of 1, 2 or 5 times a power of ten.
+pub fn ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
+    if !(lo.is_finite() && hi.is_finite()) || hi <= lo {
+        return vec![lo];
+    }
+    let raw = (hi - lo) / target.max(1) as f64;
+    let mag = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * mag)
+        .find(|s| *s >= raw)
+        .unwrap_or(10.0 * mag);
+    let first = (lo / step).ceil() as i64;
+    let last = (hi / step).floor() as i64;
+    (first..=last).map(|k| k as f64 * step).collect()
+}
+
+fn fmt_tick(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-3..1e5).contains(&a) {
+        format!("{v:.0e}")
+    } else if (v - v.round()).abs() < 1e-9 * a.max(1.0) {
+        format!("{}", v.round() as i64)
+    } else {
+        let s = format!("{v:.4}");
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    }
+}
+
+/// Data range of a panel, padded by 5 % (log y: in decades).
+fn range(vals: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in vals.filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if lo > hi {
+        return None;
+    }
+    if hi - lo < 1e-12 * lo.abs().max(1.0) {
+        let d = 0.5 * lo.abs().max(1.0);
+        return Some((lo - d, hi + d));
+    }
+    let pad = 0.05 * (hi - lo);
+    Some((lo - pad, hi + pad))
+}
+
+impl Panel {
+    fn y_value(&self, y: f64) -> f64 {
+        if self.log_y {
+            if y > 0.0 {
+                y.log10()
+            } else {
+                f64::NAN
+            }
+        } else {
+            y
+        }
+    }
+
+    /// Data ranges (y in log10 when `log_y`); None when the panel holds no finite point.
+    pub fn ranges(&self) -> Option<((f64, f64), (f64, f64))> {
+        let xs = self
+            .lines
+            .iter()
+            .flat_map(|l| l.points.iter().map(|p| p.0))
+            .chain(self.markers.iter().map(|m| m.x));
+        let ys = self
+            .lines
+            .iter()
+            .flat_map(|l| l.points.iter().map(|p| p.1))
+            .chain(self.markers.iter().map(|m| m.y))
+            .map(|y| self.y_value(y));
+        Some((range(xs)?, range(ys)?))
+    }
+
+    /// Append the panel's SVG, its box's top-left corner at (ox, oy).
+    fn draw(&self, out: &mut String, ox: f64, oy: f64) {
+        let (x0, y0) = (ox + MARGIN_L, oy + MARGIN_T);
+        let (w, h) = (PANEL_W - MARGIN_L - MARGIN_R, PANEL_H - MARGIN_T - MARGIN_B);
+        let _ = writeln!(
+            out,
+            r#"<text x="{:.1}" y="{:.1}" font-size="15" text-anchor="middle" font-weight="bold">{}</text>"#,
+            x0 + w / 2.0,
+            oy + 22.0,
+            escape(&self.title)
+        );
+        let _ = writeln!(
+            out,
+            r##"<rect x="{x0:.1}" y="{y0:.1}" width="{w:.1}" height="{h:.1}" fill="none" stroke="#444"/>"##
+        );
+        let Some(((xlo, xhi), (ylo, yhi))) = self.ranges() else {
+            let _ = writeln!(
+                out,
+                r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">no data</text>"#,
+                x0 + w / 2.0,
+                y0 + h / 2.0
+            );
+            return;
+        };
+        let px = |x: f64| x0 + (x - xlo) / (xhi - xlo) * w;
+        let py = |y: f64| y0 + h - (y - ylo) / (yhi - ylo) * h;
+        for t in ticks(xlo, xhi, 6) {
+            let _ = writeln!(
+                out,
+                r##"<line x1="{0:.1}" y1="{1:.1}" x2="{0:.1}" y2="{2:.1}" stroke="#ddd"/><text x="{0:.1}" y="{3:.1}" font-size="12" text-anchor="middle">{4}</text>"##,
+                px(t),
+                y0,
+                y0 + h,
+                y0 + h + 16.0,
+                fmt_tick(t)
+            );
+        }
+        let yticks = if self.log_y {
+            let t: Vec<f64> = (ylo.ceil() as i64..=yhi.floor() as i64)
+                .map(|k| k as f64)
+                .collect();
+            if t.len() >= 2 {
+                t
+            } else {
+                ticks(ylo, yhi, 5)
+            }
+        } else {
+            ticks(ylo, yhi, 6)
+        };
+        for t in yticks {
+            let label = if self.log_y {
+                fmt_tick(10f64.powf(t))
+            } else {
+                fmt_tick(t)
+            };
+            let _ = writeln!(
+                out,
+                r##"<line x1="{0:.1}" y1="{1:.1}" x2="{2:.1}" y2="{1:.1}" stroke="#ddd"/><text x="{3:.1}" y="{4:.1}" font-size="12" text-anchor="end">{5}</text>"##,
+                x0,
+                py(t),
+                x0 + w,
+                x0 - 6.0,
+                py(t) + 4.0,
+                label
+            );
+        }
+        let _ = writeln!(
+            out,
+            r#"<text x="{:.1}" y="{:.1}" font-size="13" text-anchor="middle">{}</text>"#,
+            x0 + w / 2.0,
+            y0 + h + 38.0,
+            escape(&self.x_label)
+        );
+        let _ = writeln!(
+            out,
+            r#"<text x="{0:.1}" y="{1:.1}" font-size="13" text-anchor="middle" transform="rotate(-90 {0:.1} {1:.1})">{2}</text>"#,
+            ox + 18.0,
+            y0 + h / 2.0,
+            escape(&self.y_label)
+        );
+        for (i, l) in self.lines.iter().enumerate() {
+            let c = PALETTE[i % PALETTE.len()];
+            let mut pts = String::new();
+            for &(x, y) in &l.points {
+                let yv = self.y_value(y);
+                if x.is_finite() && yv.is_finite() {
+                    let _ = write!(pts, "{:.2},{:.2} ", px(x), py(yv));
+                }
+            }
+            let _ = writeln!(
+                out,
+                r#"<polyline points="{}" fill="none" stroke="{c}" stroke-width="1.5"><title>{}</title></polyline>"#,
+                pts.trim_end(),
+                escape(&l.label)
+            );
+            // Sparse series (a few evaluation points) also get a dot per point.
+            if l.points.len() < 50 {
+                for &(x, y) in &l.points {
+                    let yv = self.y_value(y);
+                    if x.is_finite() && yv.is_finite() {
+                        let _ = writeln!(
+                            out,
+                            r#"<circle cx="{:.2}" cy="{:.2}" r="3" fill="{c}"/>"#,
+                            px(x),
+                            py(yv)
+                        );
+                    }
+                }
+            }
+        }
+        for m in &self.markers {
+            let yv = self.y_value(m.y);
+            if !(m.x.is_finite() && yv.is_finite()) {
+                continue;
+            }
+            let c = PALETTE[m.colour % PALETTE.len()];
+            let _ = writeln!(
+                out,
+                r#"<circle class="marker" cx="{:.2}" cy="{:.2}" r="5" fill="{c}"><title>{}</title></circle>"#,
+                px(m.x),
+                py(yv),
+                escape(&m.label),
+            );
+            // Label on the side with room: right of the marker in the left half, else left;
+            // above it in the lower half, else below.
+            let (lx, anchor) = if px(m.x) < x0 + w / 2.0 {
+                (px(m.x) + 7.0, "start")
+            } else {
+                (px(m.x) - 7.0, "end")
+            };
+            let ly = if py(yv) > y0 + h / 2.0 {
+                py(yv) - 7.0
+            } else {
+                py(yv) + 15.0
+            };
+            let _ = writeln!(
+                out,
+                r#"<text x="{lx:.1}" y="{ly:.1}" font-size="11" text-anchor="{anchor}">{}</text>"#,
+                escape(&m.label)
+            );
+        }
+    }
+}
+
+/// Height of the shared legend strip under the panels.
+const LEGEND_H: f64 = 28.0;
+
+/// A figure of panels side by side, as a standalone SVG document. Line series are matched
+/// across panels by position (series i has colour i everywhere); their labels, taken from the
+/// panel with the most series, form one legend strip under the panels.
+pub fn figure(panels: &[Panel]) -> String {
+    let width = PANEL_W * panels.len().max(1) as f64;
+    let legend: Vec<&str> = panels
+        .iter()
+        .max_by_key(|p| p.lines.len())
+        .map(|p| p.lines.iter().map(|l| l.label.as_str()).collect())
+        .unwrap_or_default();
+    let height = PANEL_H + if legend.is_empty() { 0.0 } else { LEGEND_H };
+    let mut s = format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="DejaVu Sans, Arial, sans-serif">
+<rect width="100%" height="100%" fill="white"/>
+"#
+    );
+    for (i, p) in panels.iter().enumerate() {
+        p.draw(&mut s, PANEL_W * i as f64, 0.0);
+    }
+    let mut x = MARGIN_L;
+    let y = PANEL_H + 12.0;
+    for (i, label) in legend.iter().enumerate() {
+        let c = PALETTE[i % PALETTE.len()];
+        let _ = writeln!(
+            s,
+            r#"<line x1="{x:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="{c}" stroke-width="3"/><text x="{:.1}" y="{:.1}" font-size="12">{}</text>"#,
+            x + 20.0,
+            x + 26.0,
+            y + 4.0,
+            escape(label)
+        );
+        x += 40.0 + 7.5 * label.chars().count() as f64;
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ticks_are_nice_and_inside() {
+        assert_eq!(ticks(0.0, 10.0, 5), vec![0.0, 2.0, 4.0, 6.0, 8.0, 10.0]);
+        let t = ticks(33.7, 38.9, 6);
+        assert_eq!(t, vec![34.0, 35.0, 36.0, 37.0, 38.0]);
+        for w in t.windows(2) {
+            assert!(w[1] > w[0]);
+        }
+    }
+
+    #[test]
+    fn markers_are_placed_by_value_and_text_is_escaped() {
+        let p = Panel {
+            title: "a<b & c".into(),
+            markers: vec![
+                Marker {
+                    label: "lo".into(),
+                    x: 1.0,
+                    y: 10.0,
+                    colour: 0,
+                },
+                Marker {
+                    label: "hi".into(),
+                    x: 3.0,
+                    y: 30.0,
+                    colour: 1,
+                },
+            ],
+            ..Default::default()
+        };
+        let svg = figure(&[p]);
+        assert!(svg.contains("a&lt;b &amp; c"));
+        let circles: Vec<(f64, f64)> = svg
+            .lines()
+            .filter(|l| l.contains(r#"class="marker""#))
+            .map(|l| {
+                let num = |key: &str| -> f64 {
+                    let i = l.find(key).unwrap() + key.len();
+                    l[i..].split('"').next().unwrap().parse().unwrap()
+                };
+                (num("cx=\""), num("cy=\""))
+            })
+            .collect();
+        assert_eq!(circles.len(), 2);
+        // larger x to the right, larger y higher up (smaller SVG y)
+        assert!(circles[1].0 > circles[0].0);
+        assert!(circles[1].1 < circles[0].1);
+    }
+
+    #[test]
+    fn log_axis_skips_non_positive_values_and_empty_panel_says_so() {
+        let p = Panel {
+            log_y: true,
+            lines: vec![Line {
+                label: "l".into(),
+                points: vec![(0.0, 1.0), (1.0, 0.0), (2.0, 100.0)],
+            }],
+            ..Default::default()
+        };
+        let ((_, _), (ylo, yhi)) = p.ranges().unwrap();
+        assert!(ylo < 0.0 && yhi > 2.0 && yhi < 2.5, "{ylo} {yhi}");
+        let svg = figure(&[p]);
+        let poly = svg.lines().find(|l| l.starts_with("<polyline")).unwrap();
+        let n = poly
+            .split("points=\"")
+            .nth(1)
+            .unwrap()
+            .split('"')
+            .next()
+            .unwrap();
+        assert_eq!(n.split_whitespace().count(), 2);
+        assert!(figure(&[Panel::default()]).contains("no data"));
+    }
+}
