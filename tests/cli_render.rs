@@ -257,6 +257,11 @@ fn bad_inputs_are_clear_errors() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("active-features"));
 
+    let o = run(&[&args[..], &["--background", "NaN"]].concat());
+    assert!(!o.status.success());
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("--background") && e.contains("NaN"), "{e}");
+
     // A NaN in the model is reported, not rendered.
     let mut s = scene();
     s[1].opacity = f32::NAN;

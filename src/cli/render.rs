@@ -88,6 +88,12 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
             args.active_features
         );
     }
+    if !args.background.is_finite() {
+        bail!(
+            "--background must be a finite number (got {})",
+            args.background
+        );
+    }
     let cam = camera(&args)?;
     let settings = RenderSettings {
         color: match args.color {
