@@ -303,6 +303,12 @@ impl TrainConfig {
         if self.train_views == Some(0) {
             return Err(Error::invalid("train_views", "must be >= 1"));
         }
+        if !self.background.is_finite() {
+            return Err(Error::invalid(
+                "background",
+                format!("must be finite, got {}", self.background),
+            ));
+        }
         Ok(())
     }
 
@@ -459,6 +465,19 @@ impl TrainOverrides {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn validate_names_the_bad_field() {
+        let mut c = TrainConfig::preset(Method::Unispine);
+        assert!(c.validate().is_ok());
+        c.background = f64::NAN;
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("background"), "{e}");
+        let mut c = TrainConfig::preset(Method::Unispine);
+        c.lr.opacity = -1.0;
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("lr.opacity"), "{e}");
+    }
 
     #[test]
     fn active_features_follow_one_up_sh_degree() {
