@@ -127,17 +127,7 @@ fn report_charts_place_runs_by_value_and_name_bad_logs() {
 
     let tradeoff = std::fs::read_to_string(charts.join("tradeoff.svg")).unwrap();
     assert!(tradeoff.starts_with("<svg"));
-    let markers: Vec<(f64, f64)> = tradeoff
-        .lines()
-        .filter(|l| l.contains(r#"class="marker""#))
-        .map(|l| {
-            let num = |key: &str| -> f64 {
-                let i = l.find(key).unwrap() + key.len();
-                l[i..].split('"').next().unwrap().parse().unwrap()
-            };
-            (num("cx=\""), num("cy=\""))
-        })
-        .collect();
+    let markers = unispine::report::svg::marker_centres(&tradeoff);
     // Two panels (time, fps) x two runs; in the time panel run b is slower (right) and worse (lower).
     assert_eq!(markers.len(), 4, "{tradeoff}");
     assert!(markers[1].0 > markers[0].0 && markers[1].1 > markers[0].1);

@@ -312,6 +312,20 @@ pub fn figure(panels: &[Panel]) -> String {
     s
 }
 
+/// The centres of the labelled markers of a figure written by [`figure`], in SVG coordinates
+/// (y grows downwards), in drawing order (panel by panel). For tests, and for tools that read
+/// our charts back.
+pub fn marker_centres(svg: &str) -> Vec<(f64, f64)> {
+    let attr = |line: &str, key: &str| -> Option<f64> {
+        let i = line.find(key)? + key.len();
+        line[i..].split('"').next()?.parse().ok()
+    };
+    svg.lines()
+        .filter(|l| l.contains(r#"class="marker""#))
+        .filter_map(|l| Some((attr(l, "cx=\"")?, attr(l, "cy=\"")?)))
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -348,17 +362,7 @@ mod tests {
         };
         let svg = figure(&[p]);
         assert!(svg.contains("a&lt;b &amp; c"));
-        let circles: Vec<(f64, f64)> = svg
-            .lines()
-            .filter(|l| l.contains(r#"class="marker""#))
-            .map(|l| {
-                let num = |key: &str| -> f64 {
-                    let i = l.find(key).unwrap() + key.len();
-                    l[i..].split('"').next().unwrap().parse().unwrap()
-                };
-                (num("cx=\""), num("cy=\""))
-            })
-            .collect();
+        let circles = marker_centres(&svg);
         assert_eq!(circles.len(), 2);
         // larger x to the right, larger y higher up (smaller SVG y)
         assert!(circles[1].0 > circles[0].0);
