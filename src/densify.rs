@@ -97,13 +97,16 @@ impl DensifyConfig {
     }
     /// Densify at this iteration.
     pub fn densifies(&self, it: usize) -> bool {
-        it < self.until_iter && it > self.from_iter && self.interval > 0 && it % self.interval == 0
+        it < self.until_iter
+            && it > self.from_iter
+            && self.interval > 0
+            && it.is_multiple_of(self.interval)
     }
     /// Reset opacities at this iteration.
     pub fn resets(&self, it: usize) -> bool {
         it < self.until_iter
             && self.opacity_reset_interval > 0
-            && it % self.opacity_reset_interval == 0
+            && it.is_multiple_of(self.opacity_reset_interval)
     }
     /// Apply the screen- and world-size prune at this iteration.
     pub fn prunes_big(&self, it: usize) -> bool {

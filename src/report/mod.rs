@@ -156,7 +156,7 @@ fn thin<T: Copy>(v: &[T], max: usize) -> Vec<T> {
     let step = v.len().div_ceil(max.max(1)).max(1);
     let mut out: Vec<T> = v.iter().step_by(step).copied().collect();
     if let Some(&last) = v.last() {
-        if (v.len() - 1) % step != 0 {
+        if !(v.len() - 1).is_multiple_of(step) {
             out.push(last);
         }
     }
