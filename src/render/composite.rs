@@ -65,6 +65,17 @@ pub struct CompositeSaved<R: Real> {
     pub n_contrib: Vec<u32>,
     /// Number of (pixel, splat) blends performed (throughput statistics).
     pub blends: u64,
+    /// The tile work lists built by [`forward`], reused by [`backward`] (which rebuilds them
+    /// when this is empty, e.g. for a `Default` value).
+    pub work: WorkLists<R>,
+}
+
+/// Per tile, the prefix of its work list that [`backward`] visits: the entries up to the
+/// largest `n_contrib` of the tile's pixels (later entries blend nowhere in the tile). Built by
+/// [`forward`] from the splats it composited; [`backward`] must be given the same splats.
+#[derive(Clone, Debug, Default)]
+pub struct WorkLists<R> {
+    tiles: Vec<Vec<Entry<R>>>,
 }
 
 /// One (tile, splat) pair with the splat's fields and its pixel box inside the tile.
@@ -178,27 +189,34 @@ fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Entry<R>>> {
 
 /// The work list of tile `t`: its splats in depth order, each with the box of pixels where it
 /// can reach alpha >= 1/255 clipped to the tile. Entries that reach no pixel of the tile are
-/// dropped. Forward and backward build the same list.
+/// dropped. [`forward_tile`] walks the same list lazily ([`tile_entry`]) and stops with the
+/// tile; [`backward`] reuses the prefix that forward kept, or rebuilds it with this function.
 fn tile_entries<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize) -> Vec<Entry<R>> {
-    let [rx0, rx1, ry0, ry1] = bins.pixel_rect(t).map(|x| x as u32);
-    let list = bins.list(t);
-    let mut out = Vec::with_capacity(list.len());
-    for &id in list {
-        if let Some(e) = &packed[id as usize] {
-            let (x0, x1) = (e.x0.max(rx0), e.x1.min(rx1));
-            let (y0, y1) = (e.y0.max(ry0), e.y1.min(ry1));
-            if x0 < x1 && y0 < y1 {
-                out.push(Entry {
-                    x0,
-                    x1,
-                    y0,
-                    y1,
-                    ..*e
-                });
-            }
-        }
-    }
-    out
+    let rect = bins.pixel_rect(t).map(|x| x as u32);
+    bins.list(t)
+        .iter()
+        .filter_map(|&id| tile_entry(packed, rect, id))
+        .collect()
+}
+
+/// The work-list entry of splat `id` in the tile with pixel rectangle `rect`, or `None` when
+/// its box misses the tile.
+#[inline(always)]
+fn tile_entry<R: Real>(
+    packed: &[Option<Entry<R>>],
+    [rx0, rx1, ry0, ry1]: [u32; 4],
+    id: u32,
+) -> Option<Entry<R>> {
+    let e = packed[id as usize].as_ref()?;
+    let (x0, x1) = (e.x0.max(rx0), e.x1.min(rx1));
+    let (y0, y1) = (e.y0.max(ry0), e.y1.min(ry1));
+    (x0 < x1 && y0 < y1).then_some(Entry {
+        x0,
+        x1,
+        y0,
+        y1,
+        ..*e
+    })
 }
 
 /// exp in the kernels: for f32 a branch-free polynomial ([`exp_f32`], vectorisable, within
@@ -268,12 +286,14 @@ fn power_of<R: Real>(a: R, b: R, c: R, dx: R, dy: R) -> R {
     -R::c(0.5) * (a * dx * dx + c * dy * dy) - b * dx * dy
 }
 
-/// Per-tile forward result: colour (without background), final T, n_contrib, tile-local.
+/// Per-tile forward result: colour (without background), final T, n_contrib, tile-local, and
+/// the prefix of the work list up to the largest n_contrib (what the backward visits).
 struct TileOut<R> {
     color: [R; TP],
     t: [R; TP],
     last: [u32; TP],
     blends: u64,
+    work: Vec<Entry<R>>,
 }
 
 #[inline(always)]
@@ -285,38 +305,49 @@ fn forward_tile<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize)
         t: [R::one(); TP],
         last: [0u32; TP],
         blends: 0,
+        work: Vec::new(),
     };
     let mut done = [0u32; TP];
     let mut n_done = 0u32;
-    // Pixels done per tile row; a row whose pixels are all done is skipped.
-    let mut row_done = [0u32; TILE];
-    let row_len = (x1 - x0) as u32;
+    // Pixels done per 8-column half of each tile row; a half (or row) whose pixels are all
+    // done is skipped: every lane would fail the `!done` test, so skipping it changes no bit.
+    let mut half_done = [[0u32; 2]; TILE];
+    // Image pixels per half (fewer at the right edge of the image, 0 beyond it).
+    let half_len: [u32; 2] = std::array::from_fn(|h| (x1 - x0).saturating_sub(8 * h).min(8) as u32);
     let (amax, amin, tmin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN), R::c(T_MIN));
     let one = R::one();
     let half = R::c(0.5);
     // Pixel-centre x coordinates of the tile's columns.
     let xs: [R; TILE] = std::array::from_fn(|k| R::c((x0 + k) as f64) + half);
-    let entries = tile_entries(packed, bins, t);
-    for (j, e) in entries.iter().enumerate() {
-        if n_done == npix {
-            break;
-        }
-        let tag = j as u32 + 1;
+    let rect = [x0, x1, y0, y1].map(|x| x as u32);
+    // The work list ([`tile_entries`]) built entry by entry, so that nothing is built past the
+    // point where every pixel of the tile is done.
+    let mut ids = bins.list(t).iter();
+    let mut entries: Vec<Entry<R>> = Vec::new();
+    while n_done < npix {
+        let Some(&id) = ids.next() else { break };
+        let Some(e) = tile_entry(packed, rect, id) else {
+            continue;
+        };
+        entries.push(e);
+        let e = &e;
+        let tag = entries.len() as u32;
         let (k0, k1) = (e.x0 as usize - x0, e.x1 as usize - x0);
         let colm: [u32; TILE] = std::array::from_fn(|k| mask(k0 <= k && k < k1));
         for row in e.y0 as usize..e.y1 as usize {
-            if row_done[row - y0] == row_len {
+            let hd = &mut half_done[row - y0];
+            if *hd == half_len {
                 continue;
             }
             let dy = R::c(row as f64) + half - e.my;
             let base = (row - y0) * TILE;
             let hv = halves(e, row, x0);
-            let mut nb = 0u32;
-            let mut nd = 0u32;
             for h in 0..2 {
-                if !hv[h] {
+                if !hv[h] || hd[h] == half_len[h] {
                     continue;
                 }
+                let mut nb = 0u32;
+                let mut nd = 0u32;
                 let o8 = base + 8 * h;
                 let tr: &mut [R; 8] = (&mut out.t[o8..o8 + 8]).try_into().unwrap();
                 let cr: &mut [R; 8] = (&mut out.color[o8..o8 + 8]).try_into().unwrap();
@@ -345,12 +376,15 @@ fn forward_tile<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize)
                     nb += blend & 1;
                     nd += stop & 1;
                 }
+                out.blends += nb as u64;
+                n_done += nd;
+                hd[h] += nd;
             }
-            out.blends += nb as u64;
-            n_done += nd;
-            row_done[row - y0] += nd;
         }
     }
+    // The backward visits the entries before the largest n_contrib only.
+    entries.truncate(out.last.iter().copied().max().unwrap_or(0) as usize);
+    out.work = entries;
     out
 }
 
@@ -366,10 +400,16 @@ pub fn forward<R: Real>(
 ) -> (Image2d<R>, CompositeSaved<R>) {
     let bins = tiles::bin(splats, width, height);
     let packed = pack(splats, &bins);
-    let outs: Vec<TileOut<R>> = (0..bins.n_tiles())
+    let mut outs: Vec<TileOut<R>> = (0..bins.n_tiles())
         .into_par_iter()
         .map(|t| dispatch::forward_tile(&packed, &bins, t))
         .collect();
+    let work = WorkLists {
+        tiles: outs
+            .iter_mut()
+            .map(|o| std::mem::take(&mut o.work))
+            .collect(),
+    };
     let mut img = Image2d::filled(width, height, R::zero());
     let mut final_t = vec![R::one(); width * height];
     let mut n_contrib = vec![0u32; width * height];
@@ -395,6 +435,7 @@ pub fn forward<R: Real>(
             final_t,
             n_contrib,
             blends,
+            work,
         },
     )
 }
@@ -517,7 +558,13 @@ fn backward_tile<R: Real>(
     if max_last == 0 {
         return Vec::new();
     }
-    let entries = tile_entries(packed, bins, t);
+    let built;
+    let entries: &[Entry<R>] = if saved.work.tiles.len() == bins.n_tiles() {
+        &saved.work.tiles[t]
+    } else {
+        built = tile_entries(packed, bins, t);
+        &built
+    };
     let (amax, amin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN));
     let one = R::one();
     let zero = R::zero();
@@ -618,7 +665,12 @@ pub fn backward<R: Real>(
         (saved.bins.width, saved.bins.height),
         "d_image has the size of the rendered image"
     );
-    let packed = pack(splats, &saved.bins);
+    // The work lists saved by forward, or (when absent) rebuilt from the splats.
+    let packed = if saved.work.tiles.len() == saved.bins.n_tiles() {
+        Vec::new()
+    } else {
+        pack(splats, &saved.bins)
+    };
     let recs: Vec<Vec<Rec<R>>> = (0..saved.bins.n_tiles())
         .into_par_iter()
         .map(|t| dispatch::backward_tile(&packed, saved, d_image, t))
