@@ -11,7 +11,10 @@
 //! - Eq. (5): C += c alpha T, T <- T (1 - alpha); the output is C + T_final * background.
 //!
 //! Saved for the backward pass (as 3DGS): the final T and the number of entries of the tile's
-//! work list up to and including the last blended one (`n_contrib`), per pixel.
+//! work list up to and including the last blended one (`n_contrib`), per pixel; and, per tile,
+//! the work list up to the largest `n_contrib` with the per-row chord tests the forward made
+//! ([`WorkLists`]), so that the backward neither re-packs the splats nor redoes the chord tests
+//! (square root and divisions) of the rows it visits.
 //!
 //! Backward, per pixel back to front from the last blended entry, T recovered by division
 //! T_k = T_{k+1} / (1 - alpha_k) (alpha <= 0.99, so no blow-up), S_k = sum_{j>k} c_j alpha_j T_j:
@@ -27,7 +30,10 @@
 //! Work limits that do not change any bit of the result: for each (tile, splat) the pixels
 //! evaluated are restricted to the bounding box of the ellipse o G >= (1/255) e^-0.001 widened
 //! by one pixel (outside it alpha < 1/255, so those pixels would be skipped anyway); splats with
-//! o < (1/255) e^-0.001 are dropped; a tile stops when all its pixels are done.
+//! o < (1/255) e^-0.001 are dropped; a tile stops when all its pixels are done; the forward
+//! skips a row or an 8-column half whose pixels are all done (every lane would fail the `done`
+//! test), the backward a row where no pixel has n_contrib > j (every lane would fail
+//! `j < n_contrib`).
 //!
 //! Parallelism: rayon over tiles. Each tile is computed by one task in a fixed order; the
 //! per-tile gradient records (one per list entry) are reduced sequentially in tile order, so
@@ -94,18 +100,29 @@ struct Entry<R> {
     x1: u32,
     y0: u32,
     y1: u32,
-    /// f64 copies for the per-row chord of the ellipse A dx^2 + 2 B dx dy + C dy^2 <= 2 l:
-    /// (mx, my, A, B, 2 l A, det) (det = 0: no chord test).
+    /// Bit `2 r + h`: the 8-column half `h` of tile row `r` (tile-local) may hold a pixel with
+    /// alpha >= 1/255 ([`halves`]). Set by [`forward_tile`] for the rows it visits and read by
+    /// [`backward_tile`], so the chord test (a square root and two divisions) runs once per
+    /// (tile, splat, row).
+    halves: u32,
+}
+
+/// Per-splat record of [`pack`]: the entry (box clipped to the image, `halves` unset) and the
+/// f64 copies for the per-row chord of the ellipse A dx^2 + 2 B dx dy + C dy^2 <= 2 l:
+/// (mx, my, A, B, 2 l A, det) (det = 0: no chord test).
+#[derive(Clone, Copy, Debug)]
+struct Packed<R> {
+    e: Entry<R>,
     chord: [f64; 6],
 }
 
 /// Which 8-column halves of tile row `row` (tile origin column `x0`) can hold a pixel with
-/// alpha >= 1/255 for entry `e`: those meeting the ellipse's chord on that row widened by one
-/// pixel (the same margin as the box). Outside it alpha < 1/255, so skipping a half changes
-/// no bit.
+/// alpha >= 1/255 for the splat with chord data `chord` ([`Packed`]): those meeting the
+/// ellipse's chord on that row widened by one pixel (the same margin as the box). Outside it
+/// alpha < 1/255, so skipping a half changes no bit.
 #[inline(always)]
-fn halves<R>(e: &Entry<R>, row: usize, x0: usize) -> [bool; 2] {
-    let [mx, my, a, b, two_la, det] = e.chord;
+fn halves(chord: &[f64; 6], row: usize, x0: usize) -> [bool; 2] {
+    let [mx, my, a, b, two_la, det] = *chord;
     if det <= 0.0 {
         return [true, true];
     }
@@ -130,7 +147,7 @@ fn halves<R>(e: &Entry<R>, row: usize, x0: usize) -> [bool; 2] {
 /// reach alpha >= 1/255 anywhere (not drawn, o < 1/255, or an empty box). Computed once per
 /// pass (parallel over splats, one packed record per splat so that the per-tile gathers touch
 /// one cache line per entry).
-fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Entry<R>>> {
+fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Packed<R>>> {
     let (w, h) = (bins.width as f64, bins.height as f64);
     (0..s.radius.len())
         .into_par_iter()
@@ -164,7 +181,7 @@ fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Entry<R>>> {
             if !(x0 < x1 && y0 < y1) {
                 return None;
             }
-            Some(Entry {
+            let e = Entry {
                 id: i as u32,
                 mx: s.mean2d[i][0],
                 my: s.mean2d[i][1],
@@ -177,25 +194,36 @@ fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Entry<R>>> {
                 x1: x1 as u32,
                 y0: y0 as u32,
                 y1: y1 as u32,
-                chord: if ok {
-                    [mx, my, a, b, 2.0 * l * a, det]
-                } else {
-                    [mx, my, a, b, 0.0, 0.0]
-                },
-            })
+                halves: 0,
+            };
+            let chord = if ok {
+                [mx, my, a, b, 2.0 * l * a, det]
+            } else {
+                [mx, my, a, b, 0.0, 0.0]
+            };
+            Some(Packed { e, chord })
         })
         .collect()
 }
 
 /// The work list of tile `t`: its splats in depth order, each with the box of pixels where it
 /// can reach alpha >= 1/255 clipped to the tile. Entries that reach no pixel of the tile are
-/// dropped. [`forward_tile`] walks the same list lazily ([`tile_entry`]) and stops with the
-/// tile; [`backward`] reuses the prefix that forward kept, or rebuilds it with this function.
-fn tile_entries<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize) -> Vec<Entry<R>> {
+/// dropped. [`backward`] reuses the prefix that [`forward_tile`] kept, or rebuilds the list
+/// with this function.
+///
+/// `with_halves`: fill [`Entry::halves`] for every row of each box (what [`backward`] needs
+/// when it rebuilds the list); otherwise it is left 0 and [`forward_tile`] fills it for the
+/// rows it visits.
+fn tile_entries<R: Real>(
+    packed: &[Option<Packed<R>>],
+    bins: &TileBins,
+    t: usize,
+    with_halves: bool,
+) -> Vec<Entry<R>> {
     let rect = bins.pixel_rect(t).map(|x| x as u32);
     bins.list(t)
         .iter()
-        .filter_map(|&id| tile_entry(packed, rect, id))
+        .filter_map(|&id| tile_entry(packed, rect, id, with_halves))
         .collect()
 }
 
@@ -203,20 +231,38 @@ fn tile_entries<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize)
 /// its box misses the tile.
 #[inline(always)]
 fn tile_entry<R: Real>(
-    packed: &[Option<Entry<R>>],
+    packed: &[Option<Packed<R>>],
     [rx0, rx1, ry0, ry1]: [u32; 4],
     id: u32,
+    with_halves: bool,
 ) -> Option<Entry<R>> {
-    let e = packed[id as usize].as_ref()?;
+    let Packed { e, chord } = packed[id as usize].as_ref()?;
     let (x0, x1) = (e.x0.max(rx0), e.x1.min(rx1));
     let (y0, y1) = (e.y0.max(ry0), e.y1.min(ry1));
-    (x0 < x1 && y0 < y1).then_some(Entry {
+    if !(x0 < x1 && y0 < y1) {
+        return None;
+    }
+    let mut bits = 0u32;
+    if with_halves {
+        for row in y0..y1 {
+            let [h0, h1] = halves(chord, row as usize, rx0 as usize);
+            bits |= half_bits([h0, h1], (row - ry0) as usize);
+        }
+    }
+    Some(Entry {
         x0,
         x1,
         y0,
         y1,
+        halves: bits,
         ..*e
     })
+}
+
+/// The bits of [`Entry::halves`] for tile row `r`.
+#[inline(always)]
+fn half_bits([h0, h1]: [bool; 2], r: usize) -> u32 {
+    ((h0 as u32) << (2 * r)) | ((h1 as u32) << (2 * r + 1))
 }
 
 /// exp in the kernels: for f32 a branch-free polynomial ([`exp_f32`], vectorisable, within
@@ -297,7 +343,7 @@ struct TileOut<R> {
 }
 
 #[inline(always)]
-fn forward_tile<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize) -> TileOut<R> {
+fn forward_tile<R: Real>(packed: &[Option<Packed<R>>], bins: &TileBins, t: usize) -> TileOut<R> {
     let [x0, x1, y0, y1] = bins.pixel_rect(t);
     let npix = ((x1 - x0) * (y1 - y0)) as u32;
     let mut out = TileOut {
@@ -319,19 +365,23 @@ fn forward_tile<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize)
     let half = R::c(0.5);
     // Pixel-centre x coordinates of the tile's columns.
     let xs: [R; TILE] = std::array::from_fn(|k| R::c((x0 + k) as f64) + half);
-    let rect = [x0, x1, y0, y1].map(|x| x as u32);
-    // The work list ([`tile_entries`]) built entry by entry, so that nothing is built past the
-    // point where every pixel of the tile is done.
-    let mut ids = bins.list(t).iter();
-    let mut entries: Vec<Entry<R>> = Vec::new();
-    while n_done < npix {
-        let Some(&id) = ids.next() else { break };
-        let Some(e) = tile_entry(packed, rect, id) else {
-            continue;
+    // The whole work list is gathered first (independent loads, so the cache misses of the
+    // random per-splat reads overlap); its prefix up to the largest n_contrib is kept for the
+    // backward.
+    let mut entries = tile_entries(packed, bins, t, false);
+    for j in 0..entries.len() {
+        if n_done == npix {
+            break;
+        }
+        let e = &entries[j];
+        // The chord test of each visited row, recorded in `halves` for the backward. A row the
+        // forward skips here (all its pixels done before entry j) has n_contrib <= j at every
+        // pixel, so the backward skips it too and its bits are never read.
+        let Some(Packed { chord, .. }) = packed[e.id as usize].as_ref() else {
+            unreachable!("work-list entries come from packed splats")
         };
-        entries.push(e);
-        let e = &e;
-        let tag = entries.len() as u32;
+        let mut bits = 0u32;
+        let tag = j as u32 + 1;
         let (k0, k1) = (e.x0 as usize - x0, e.x1 as usize - x0);
         let colm: [u32; TILE] = std::array::from_fn(|k| mask(k0 <= k && k < k1));
         for row in e.y0 as usize..e.y1 as usize {
@@ -341,7 +391,8 @@ fn forward_tile<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize)
             }
             let dy = R::c(row as f64) + half - e.my;
             let base = (row - y0) * TILE;
-            let hv = halves(e, row, x0);
+            let hv = halves(chord, row, x0);
+            bits |= half_bits(hv, row - y0);
             for h in 0..2 {
                 if !hv[h] || hd[h] == half_len[h] {
                     continue;
@@ -381,6 +432,7 @@ fn forward_tile<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize)
                 hd[h] += nd;
             }
         }
+        entries[j].halves = bits;
     }
     // The backward visits the entries before the largest n_contrib only.
     entries.truncate(out.last.iter().copied().max().unwrap_or(0) as usize);
@@ -474,7 +526,7 @@ mod dispatch {
     use super::*;
 
     pub(super) fn forward_tile<R: Real>(
-        s: &[Option<Entry<R>>],
+        s: &[Option<Packed<R>>],
         bins: &TileBins,
         t: usize,
     ) -> TileOut<R> {
@@ -489,7 +541,7 @@ mod dispatch {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn forward_tile_avx2<R: Real>(
-        s: &[Option<Entry<R>>],
+        s: &[Option<Packed<R>>],
         bins: &TileBins,
         t: usize,
     ) -> TileOut<R> {
@@ -497,7 +549,7 @@ mod dispatch {
     }
 
     pub(super) fn backward_tile<R: Real>(
-        s: &[Option<Entry<R>>],
+        s: &[Option<Packed<R>>],
         saved: &CompositeSaved<R>,
         d_image: &Image2d<R>,
         t: usize,
@@ -513,7 +565,7 @@ mod dispatch {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn backward_tile_avx2<R: Real>(
-        s: &[Option<Entry<R>>],
+        s: &[Option<Packed<R>>],
         saved: &CompositeSaved<R>,
         d_image: &Image2d<R>,
         t: usize,
@@ -527,7 +579,7 @@ type Rec<R> = (u32, [R; 7]);
 
 #[inline(always)]
 fn backward_tile<R: Real>(
-    packed: &[Option<Entry<R>>],
+    packed: &[Option<Packed<R>>],
     saved: &CompositeSaved<R>,
     d_image: &Image2d<R>,
     t: usize,
@@ -562,7 +614,7 @@ fn backward_tile<R: Real>(
     let entries: &[Entry<R>] = if saved.work.tiles.len() == bins.n_tiles() {
         &saved.work.tiles[t]
     } else {
-        built = tile_entries(packed, bins, t);
+        built = tile_entries(packed, bins, t, true);
         &built
     };
     let (amax, amin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN));
@@ -590,7 +642,8 @@ fn backward_tile<R: Real>(
             }
             let dy = R::c(row as f64) + half - e.my;
             let base = (row - y0) * TILE;
-            let hv = halves(e, row, x0);
+            let r2 = 2 * (row - y0);
+            let hv = [e.halves >> r2 & 1 != 0, e.halves >> (r2 + 1) & 1 != 0];
             for h in 0..2 {
                 if !hv[h] {
                     continue;
@@ -769,7 +822,7 @@ pub fn box_pixels<R: Real>(splats: &Splats<R>, bins: &TileBins) -> u64 {
     let packed = pack(splats, bins);
     (0..bins.n_tiles())
         .map(|t| {
-            tile_entries(&packed, bins, t)
+            tile_entries(&packed, bins, t, false)
                 .iter()
                 .map(|e| ((e.x1 - e.x0) * (e.y1 - e.y0)) as u64)
                 .sum::<u64>()
