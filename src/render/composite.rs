@@ -369,11 +369,10 @@ fn forward_tile<R: Real>(packed: &[Option<Packed<R>>], bins: &TileBins, t: usize
     // random per-splat reads overlap); its prefix up to the largest n_contrib is kept for the
     // backward.
     let mut entries = tile_entries(packed, bins, t, false);
-    for j in 0..entries.len() {
+    for (j, e) in entries.iter_mut().enumerate() {
         if n_done == npix {
             break;
         }
-        let e = &entries[j];
         // The chord test of each visited row, recorded in `halves` for the backward. A row the
         // forward skips here (all its pixels done before entry j) has n_contrib <= j at every
         // pixel, so the backward skips it too and its bits are never read.
@@ -432,7 +431,7 @@ fn forward_tile<R: Real>(packed: &[Option<Packed<R>>], bins: &TileBins, t: usize
                 hd[h] += nd;
             }
         }
-        entries[j].halves = bits;
+        e.halves = bits;
     }
     // The backward visits the entries before the largest n_contrib only.
     entries.truncate(out.last.iter().copied().max().unwrap_or(0) as usize);
