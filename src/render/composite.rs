@@ -11,7 +11,10 @@
 //! - Eq. (5): C += c alpha T, T <- T (1 - alpha); the output is C + T_final * background.
 //!
 //! Saved for the backward pass (as 3DGS): the final T and the number of entries of the tile's
-//! work list up to and including the last blended one (`n_contrib`), per pixel.
+//! work list up to and including the last blended one (`n_contrib`), per pixel; and, per tile,
+//! the work list up to the largest `n_contrib` with the per-row chord tests the forward made
+//! ([`WorkLists`]), so that the backward neither re-packs the splats nor redoes the chord tests
+//! (square root and divisions) of the rows it visits.
 //!
 //! Backward, per pixel back to front from the last blended entry, T recovered by division
 //! T_k = T_{k+1} / (1 - alpha_k) (alpha <= 0.99, so no blow-up), S_k = sum_{j>k} c_j alpha_j T_j:
@@ -27,7 +30,10 @@
 //! Work limits that do not change any bit of the result: for each (tile, splat) the pixels
 //! evaluated are restricted to the bounding box of the ellipse o G >= (1/255) e^-0.001 widened
 //! by one pixel (outside it alpha < 1/255, so those pixels would be skipped anyway); splats with
-//! o < (1/255) e^-0.001 are dropped; a tile stops when all its pixels are done.
+//! o < (1/255) e^-0.001 are dropped; a tile stops when all its pixels are done; the forward
+//! skips a row or an 8-column half whose pixels are all done (every lane would fail the `done`
+//! test), the backward a row where no pixel has n_contrib > j (every lane would fail
+//! `j < n_contrib`).
 //!
 //! Parallelism: rayon over tiles. Each tile is computed by one task in a fixed order; the
 //! per-tile gradient records (one per list entry) are reduced sequentially in tile order, so
@@ -65,6 +71,17 @@ pub struct CompositeSaved<R: Real> {
     pub n_contrib: Vec<u32>,
     /// Number of (pixel, splat) blends performed (throughput statistics).
     pub blends: u64,
+    /// The tile work lists built by [`forward`], reused by [`backward`] (which rebuilds them
+    /// when this is empty, e.g. for a `Default` value).
+    pub work: WorkLists<R>,
+}
+
+/// Per tile, the prefix of its work list that [`backward`] visits: the entries up to the
+/// largest `n_contrib` of the tile's pixels (later entries blend nowhere in the tile). Built by
+/// [`forward`] from the splats it composited; [`backward`] must be given the same splats.
+#[derive(Clone, Debug, Default)]
+pub struct WorkLists<R> {
+    tiles: Vec<Vec<Entry<R>>>,
 }
 
 /// One (tile, splat) pair with the splat's fields and its pixel box inside the tile.
@@ -83,18 +100,29 @@ struct Entry<R> {
     x1: u32,
     y0: u32,
     y1: u32,
-    /// f64 copies for the per-row chord of the ellipse A dx^2 + 2 B dx dy + C dy^2 <= 2 l:
-    /// (mx, my, A, B, 2 l A, det) (det = 0: no chord test).
+    /// Bit `2 r + h`: the 8-column half `h` of tile row `r` (tile-local) may hold a pixel with
+    /// alpha >= 1/255 ([`halves`]). Set by [`forward_tile`] for the rows it visits and read by
+    /// [`backward_tile`], so the chord test (a square root and two divisions) runs once per
+    /// (tile, splat, row).
+    halves: u32,
+}
+
+/// Per-splat record of [`pack`]: the entry (box clipped to the image, `halves` unset) and the
+/// f64 copies for the per-row chord of the ellipse A dx^2 + 2 B dx dy + C dy^2 <= 2 l:
+/// (mx, my, A, B, 2 l A, det) (det = 0: no chord test).
+#[derive(Clone, Copy, Debug)]
+struct Packed<R> {
+    e: Entry<R>,
     chord: [f64; 6],
 }
 
 /// Which 8-column halves of tile row `row` (tile origin column `x0`) can hold a pixel with
-/// alpha >= 1/255 for entry `e`: those meeting the ellipse's chord on that row widened by one
-/// pixel (the same margin as the box). Outside it alpha < 1/255, so skipping a half changes
-/// no bit.
+/// alpha >= 1/255 for the splat with chord data `chord` ([`Packed`]): those meeting the
+/// ellipse's chord on that row widened by one pixel (the same margin as the box). Outside it
+/// alpha < 1/255, so skipping a half changes no bit.
 #[inline(always)]
-fn halves<R>(e: &Entry<R>, row: usize, x0: usize) -> [bool; 2] {
-    let [mx, my, a, b, two_la, det] = e.chord;
+fn halves(chord: &[f64; 6], row: usize, x0: usize) -> [bool; 2] {
+    let [mx, my, a, b, two_la, det] = *chord;
     if det <= 0.0 {
         return [true, true];
     }
@@ -119,7 +147,7 @@ fn halves<R>(e: &Entry<R>, row: usize, x0: usize) -> [bool; 2] {
 /// reach alpha >= 1/255 anywhere (not drawn, o < 1/255, or an empty box). Computed once per
 /// pass (parallel over splats, one packed record per splat so that the per-tile gathers touch
 /// one cache line per entry).
-fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Entry<R>>> {
+fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Packed<R>>> {
     let (w, h) = (bins.width as f64, bins.height as f64);
     (0..s.radius.len())
         .into_par_iter()
@@ -153,7 +181,7 @@ fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Entry<R>>> {
             if !(x0 < x1 && y0 < y1) {
                 return None;
             }
-            Some(Entry {
+            let e = Entry {
                 id: i as u32,
                 mx: s.mean2d[i][0],
                 my: s.mean2d[i][1],
@@ -166,39 +194,75 @@ fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Entry<R>>> {
                 x1: x1 as u32,
                 y0: y0 as u32,
                 y1: y1 as u32,
-                chord: if ok {
-                    [mx, my, a, b, 2.0 * l * a, det]
-                } else {
-                    [mx, my, a, b, 0.0, 0.0]
-                },
-            })
+                halves: 0,
+            };
+            let chord = if ok {
+                [mx, my, a, b, 2.0 * l * a, det]
+            } else {
+                [mx, my, a, b, 0.0, 0.0]
+            };
+            Some(Packed { e, chord })
         })
         .collect()
 }
 
 /// The work list of tile `t`: its splats in depth order, each with the box of pixels where it
 /// can reach alpha >= 1/255 clipped to the tile. Entries that reach no pixel of the tile are
-/// dropped. Forward and backward build the same list.
-fn tile_entries<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize) -> Vec<Entry<R>> {
-    let [rx0, rx1, ry0, ry1] = bins.pixel_rect(t).map(|x| x as u32);
-    let list = bins.list(t);
-    let mut out = Vec::with_capacity(list.len());
-    for &id in list {
-        if let Some(e) = &packed[id as usize] {
-            let (x0, x1) = (e.x0.max(rx0), e.x1.min(rx1));
-            let (y0, y1) = (e.y0.max(ry0), e.y1.min(ry1));
-            if x0 < x1 && y0 < y1 {
-                out.push(Entry {
-                    x0,
-                    x1,
-                    y0,
-                    y1,
-                    ..*e
-                });
-            }
+/// dropped. [`backward`] reuses the prefix that [`forward_tile`] kept, or rebuilds the list
+/// with this function.
+///
+/// `with_halves`: fill [`Entry::halves`] for every row of each box (what [`backward`] needs
+/// when it rebuilds the list); otherwise it is left 0 and [`forward_tile`] fills it for the
+/// rows it visits.
+fn tile_entries<R: Real>(
+    packed: &[Option<Packed<R>>],
+    bins: &TileBins,
+    t: usize,
+    with_halves: bool,
+) -> Vec<Entry<R>> {
+    let rect = bins.pixel_rect(t).map(|x| x as u32);
+    bins.list(t)
+        .iter()
+        .filter_map(|&id| tile_entry(packed, rect, id, with_halves))
+        .collect()
+}
+
+/// The work-list entry of splat `id` in the tile with pixel rectangle `rect`, or `None` when
+/// its box misses the tile.
+#[inline(always)]
+fn tile_entry<R: Real>(
+    packed: &[Option<Packed<R>>],
+    [rx0, rx1, ry0, ry1]: [u32; 4],
+    id: u32,
+    with_halves: bool,
+) -> Option<Entry<R>> {
+    let Packed { e, chord } = packed[id as usize].as_ref()?;
+    let (x0, x1) = (e.x0.max(rx0), e.x1.min(rx1));
+    let (y0, y1) = (e.y0.max(ry0), e.y1.min(ry1));
+    if !(x0 < x1 && y0 < y1) {
+        return None;
+    }
+    let mut bits = 0u32;
+    if with_halves {
+        for row in y0..y1 {
+            let [h0, h1] = halves(chord, row as usize, rx0 as usize);
+            bits |= half_bits([h0, h1], (row - ry0) as usize);
         }
     }
-    out
+    Some(Entry {
+        x0,
+        x1,
+        y0,
+        y1,
+        halves: bits,
+        ..*e
+    })
+}
+
+/// The bits of [`Entry::halves`] for tile row `r`.
+#[inline(always)]
+fn half_bits([h0, h1]: [bool; 2], r: usize) -> u32 {
+    ((h0 as u32) << (2 * r)) | ((h1 as u32) << (2 * r + 1))
 }
 
 /// exp in the kernels: for f32 a branch-free polynomial ([`exp_f32`], vectorisable, within
@@ -268,16 +332,18 @@ fn power_of<R: Real>(a: R, b: R, c: R, dx: R, dy: R) -> R {
     -R::c(0.5) * (a * dx * dx + c * dy * dy) - b * dx * dy
 }
 
-/// Per-tile forward result: colour (without background), final T, n_contrib, tile-local.
+/// Per-tile forward result: colour (without background), final T, n_contrib, tile-local, and
+/// the prefix of the work list up to the largest n_contrib (what the backward visits).
 struct TileOut<R> {
     color: [R; TP],
     t: [R; TP],
     last: [u32; TP],
     blends: u64,
+    work: Vec<Entry<R>>,
 }
 
 #[inline(always)]
-fn forward_tile<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize) -> TileOut<R> {
+fn forward_tile<R: Real>(packed: &[Option<Packed<R>>], bins: &TileBins, t: usize) -> TileOut<R> {
     let [x0, x1, y0, y1] = bins.pixel_rect(t);
     let npix = ((x1 - x0) * (y1 - y0)) as u32;
     let mut out = TileOut {
@@ -285,38 +351,53 @@ fn forward_tile<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize)
         t: [R::one(); TP],
         last: [0u32; TP],
         blends: 0,
+        work: Vec::new(),
     };
     let mut done = [0u32; TP];
     let mut n_done = 0u32;
-    // Pixels done per tile row; a row whose pixels are all done is skipped.
-    let mut row_done = [0u32; TILE];
-    let row_len = (x1 - x0) as u32;
+    // Pixels done per 8-column half of each tile row; a half (or row) whose pixels are all
+    // done is skipped: every lane would fail the `!done` test, so skipping it changes no bit.
+    let mut half_done = [[0u32; 2]; TILE];
+    // Image pixels per half (fewer at the right edge of the image, 0 beyond it).
+    let half_len: [u32; 2] = std::array::from_fn(|h| (x1 - x0).saturating_sub(8 * h).min(8) as u32);
     let (amax, amin, tmin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN), R::c(T_MIN));
     let one = R::one();
     let half = R::c(0.5);
     // Pixel-centre x coordinates of the tile's columns.
     let xs: [R; TILE] = std::array::from_fn(|k| R::c((x0 + k) as f64) + half);
-    let entries = tile_entries(packed, bins, t);
-    for (j, e) in entries.iter().enumerate() {
+    // The whole work list is gathered first (independent loads, so the cache misses of the
+    // random per-splat reads overlap); its prefix up to the largest n_contrib is kept for the
+    // backward.
+    let mut entries = tile_entries(packed, bins, t, false);
+    for (j, e) in entries.iter_mut().enumerate() {
         if n_done == npix {
             break;
         }
+        // The chord test of each visited row, recorded in `halves` for the backward. A row the
+        // forward skips here (all its pixels done before entry j) has n_contrib <= j at every
+        // pixel, so the backward skips it too and its bits are never read.
+        let Some(Packed { chord, .. }) = packed[e.id as usize].as_ref() else {
+            unreachable!("work-list entries come from packed splats")
+        };
+        let mut bits = 0u32;
         let tag = j as u32 + 1;
         let (k0, k1) = (e.x0 as usize - x0, e.x1 as usize - x0);
         let colm: [u32; TILE] = std::array::from_fn(|k| mask(k0 <= k && k < k1));
         for row in e.y0 as usize..e.y1 as usize {
-            if row_done[row - y0] == row_len {
+            let hd = &mut half_done[row - y0];
+            if *hd == half_len {
                 continue;
             }
             let dy = R::c(row as f64) + half - e.my;
             let base = (row - y0) * TILE;
-            let hv = halves(e, row, x0);
-            let mut nb = 0u32;
-            let mut nd = 0u32;
+            let hv = halves(chord, row, x0);
+            bits |= half_bits(hv, row - y0);
             for h in 0..2 {
-                if !hv[h] {
+                if !hv[h] || hd[h] == half_len[h] {
                     continue;
                 }
+                let mut nb = 0u32;
+                let mut nd = 0u32;
                 let o8 = base + 8 * h;
                 let tr: &mut [R; 8] = (&mut out.t[o8..o8 + 8]).try_into().unwrap();
                 let cr: &mut [R; 8] = (&mut out.color[o8..o8 + 8]).try_into().unwrap();
@@ -345,12 +426,16 @@ fn forward_tile<R: Real>(packed: &[Option<Entry<R>>], bins: &TileBins, t: usize)
                     nb += blend & 1;
                     nd += stop & 1;
                 }
+                out.blends += nb as u64;
+                n_done += nd;
+                hd[h] += nd;
             }
-            out.blends += nb as u64;
-            n_done += nd;
-            row_done[row - y0] += nd;
         }
+        e.halves = bits;
     }
+    // The backward visits the entries before the largest n_contrib only.
+    entries.truncate(out.last.iter().copied().max().unwrap_or(0) as usize);
+    out.work = entries;
     out
 }
 
@@ -366,10 +451,16 @@ pub fn forward<R: Real>(
 ) -> (Image2d<R>, CompositeSaved<R>) {
     let bins = tiles::bin(splats, width, height);
     let packed = pack(splats, &bins);
-    let outs: Vec<TileOut<R>> = (0..bins.n_tiles())
+    let mut outs: Vec<TileOut<R>> = (0..bins.n_tiles())
         .into_par_iter()
         .map(|t| dispatch::forward_tile(&packed, &bins, t))
         .collect();
+    let work = WorkLists {
+        tiles: outs
+            .iter_mut()
+            .map(|o| std::mem::take(&mut o.work))
+            .collect(),
+    };
     let mut img = Image2d::filled(width, height, R::zero());
     let mut final_t = vec![R::one(); width * height];
     let mut n_contrib = vec![0u32; width * height];
@@ -395,6 +486,7 @@ pub fn forward<R: Real>(
             final_t,
             n_contrib,
             blends,
+            work,
         },
     )
 }
@@ -433,7 +525,7 @@ mod dispatch {
     use super::*;
 
     pub(super) fn forward_tile<R: Real>(
-        s: &[Option<Entry<R>>],
+        s: &[Option<Packed<R>>],
         bins: &TileBins,
         t: usize,
     ) -> TileOut<R> {
@@ -448,7 +540,7 @@ mod dispatch {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn forward_tile_avx2<R: Real>(
-        s: &[Option<Entry<R>>],
+        s: &[Option<Packed<R>>],
         bins: &TileBins,
         t: usize,
     ) -> TileOut<R> {
@@ -456,7 +548,7 @@ mod dispatch {
     }
 
     pub(super) fn backward_tile<R: Real>(
-        s: &[Option<Entry<R>>],
+        s: &[Option<Packed<R>>],
         saved: &CompositeSaved<R>,
         d_image: &Image2d<R>,
         t: usize,
@@ -472,7 +564,7 @@ mod dispatch {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn backward_tile_avx2<R: Real>(
-        s: &[Option<Entry<R>>],
+        s: &[Option<Packed<R>>],
         saved: &CompositeSaved<R>,
         d_image: &Image2d<R>,
         t: usize,
@@ -486,7 +578,7 @@ type Rec<R> = (u32, [R; 7]);
 
 #[inline(always)]
 fn backward_tile<R: Real>(
-    packed: &[Option<Entry<R>>],
+    packed: &[Option<Packed<R>>],
     saved: &CompositeSaved<R>,
     d_image: &Image2d<R>,
     t: usize,
@@ -517,7 +609,13 @@ fn backward_tile<R: Real>(
     if max_last == 0 {
         return Vec::new();
     }
-    let entries = tile_entries(packed, bins, t);
+    let built;
+    let entries: &[Entry<R>] = if saved.work.tiles.len() == bins.n_tiles() {
+        &saved.work.tiles[t]
+    } else {
+        built = tile_entries(packed, bins, t, true);
+        &built
+    };
     let (amax, amin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN));
     let one = R::one();
     let zero = R::zero();
@@ -543,7 +641,8 @@ fn backward_tile<R: Real>(
             }
             let dy = R::c(row as f64) + half - e.my;
             let base = (row - y0) * TILE;
-            let hv = halves(e, row, x0);
+            let r2 = 2 * (row - y0);
+            let hv = [e.halves >> r2 & 1 != 0, e.halves >> (r2 + 1) & 1 != 0];
             for h in 0..2 {
                 if !hv[h] {
                     continue;
@@ -618,7 +717,12 @@ pub fn backward<R: Real>(
         (saved.bins.width, saved.bins.height),
         "d_image has the size of the rendered image"
     );
-    let packed = pack(splats, &saved.bins);
+    // The work lists saved by forward, or (when absent) rebuilt from the splats.
+    let packed = if saved.work.tiles.len() == saved.bins.n_tiles() {
+        Vec::new()
+    } else {
+        pack(splats, &saved.bins)
+    };
     let recs: Vec<Vec<Rec<R>>> = (0..saved.bins.n_tiles())
         .into_par_iter()
         .map(|t| dispatch::backward_tile(&packed, saved, d_image, t))
@@ -717,7 +821,7 @@ pub fn box_pixels<R: Real>(splats: &Splats<R>, bins: &TileBins) -> u64 {
     let packed = pack(splats, bins);
     (0..bins.n_tiles())
         .map(|t| {
-            tile_entries(&packed, bins, t)
+            tile_entries(&packed, bins, t, false)
                 .iter()
                 .map(|e| ((e.x1 - e.x0) * (e.y1 - e.y0)) as u64)
                 .sum::<u64>()

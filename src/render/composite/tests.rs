@@ -248,3 +248,34 @@ fn nan_splats_are_an_error_and_never_poison_the_image() {
     assert_eq!(g.conic[4], [0.0; 3]);
     assert!(g.mean2d.iter().flatten().all(|v| v.is_finite()));
 }
+
+#[test]
+fn backward_with_saved_work_lists_equals_rebuilt_lists_bitwise() {
+    for (n, w, h, seed) in [(400, 64, 48, 11), (60, 37, 29, 12)] {
+        let s = random_splats(n, w, h, seed);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed + 7);
+        let wts = Image2d::from_vec(
+            w,
+            h,
+            (0..w * h).map(|_| rng.random_range(-1.0..1.0)).collect(),
+        );
+        let (_, saved) = forward(&s, w, h, 0.2);
+        assert_eq!(saved.work.tiles.len(), saved.bins.n_tiles());
+        let mut bare = saved.clone();
+        bare.work = WorkLists::default();
+        assert_eq!(backward(&s, &saved, &wts), backward(&s, &bare, &wts));
+        let s32 = Splats {
+            mean2d: s.mean2d.iter().map(|a| a.map(|x| x as f32)).collect(),
+            conic: s.conic.iter().map(|a| a.map(|x| x as f32)).collect(),
+            depth: s.depth.iter().map(|&x| x as f32).collect(),
+            radius: s.radius.clone(),
+            opacity: s.opacity.iter().map(|&x| x as f32).collect(),
+            color: s.color.iter().map(|&x| x as f32).collect(),
+        };
+        let w32 = Image2d::from_vec(w, h, wts.data.iter().map(|&x| x as f32).collect());
+        let (_, saved) = forward(&s32, w, h, 0.2f32);
+        let mut bare = saved.clone();
+        bare.work = WorkLists::default();
+        assert_eq!(backward(&s32, &saved, &w32), backward(&s32, &bare, &w32));
+    }
+}
