@@ -33,6 +33,18 @@ pub(crate) fn random_splats(n: usize, w: usize, h: usize, seed: u64) -> Splats<f
     s
 }
 
+/// The same splats rounded to f32.
+fn to_f32(s: &Splats<f64>) -> Splats<f32> {
+    Splats {
+        mean2d: s.mean2d.iter().map(|a| a.map(|x| x as f32)).collect(),
+        conic: s.conic.iter().map(|a| a.map(|x| x as f32)).collect(),
+        depth: s.depth.iter().map(|&x| x as f32).collect(),
+        radius: s.radius.clone(),
+        opacity: s.opacity.iter().map(|&x| x as f32).collect(),
+        color: s.color.iter().map(|&x| x as f32).collect(),
+    }
+}
+
 #[test]
 fn forward_equals_naive_reference_bitwise() {
     for (n, w, h, seed) in [(60, 37, 29, 1), (400, 64, 48, 2), (5, 16, 16, 3)] {
@@ -42,14 +54,7 @@ fn forward_equals_naive_reference_bitwise() {
             let (img, _) = forward(&s, w, h, bg);
             let naive = naive_forward(&s, w, h, bg);
             assert_eq!(img, naive, "n {n} {w}x{h} bg {bg}");
-            let s32 = Splats {
-                mean2d: s.mean2d.iter().map(|a| a.map(|x| x as f32)).collect(),
-                conic: s.conic.iter().map(|a| a.map(|x| x as f32)).collect(),
-                depth: s.depth.iter().map(|&x| x as f32).collect(),
-                radius: s.radius.clone(),
-                opacity: s.opacity.iter().map(|&x| x as f32).collect(),
-                color: s.color.iter().map(|&x| x as f32).collect(),
-            };
+            let s32 = to_f32(&s);
             let (i32_, _) = forward(&s32, w, h, bg as f32);
             assert_eq!(i32_, naive_forward(&s32, w, h, bg as f32));
         }
@@ -264,14 +269,7 @@ fn backward_with_saved_work_lists_equals_rebuilt_lists_bitwise() {
         let mut bare = saved.clone();
         bare.work = WorkLists::default();
         assert_eq!(backward(&s, &saved, &wts), backward(&s, &bare, &wts));
-        let s32 = Splats {
-            mean2d: s.mean2d.iter().map(|a| a.map(|x| x as f32)).collect(),
-            conic: s.conic.iter().map(|a| a.map(|x| x as f32)).collect(),
-            depth: s.depth.iter().map(|&x| x as f32).collect(),
-            radius: s.radius.clone(),
-            opacity: s.opacity.iter().map(|&x| x as f32).collect(),
-            color: s.color.iter().map(|&x| x as f32).collect(),
-        };
+        let s32 = to_f32(&s);
         let w32 = Image2d::from_vec(w, h, wts.data.iter().map(|&x| x as f32).collect());
         let (_, saved) = forward(&s32, w, h, 0.2f32);
         let mut bare = saved.clone();
