@@ -12,8 +12,11 @@
 //!   volume.
 //! - The result is `sum(length in mm x voxel value)`: no exp, no I0, no log (NAF / X-Gaussian
 //!   targets).
-//! - Each pixel is computed by one sequential loop; rows are distributed over threads and written
-//!   in place, so the image is bit-identical for any thread count.
+//! - Each pixel is computed by one sequential loop that depends only on its own ray; bands of rows
+//!   are distributed over threads and written in place, so the image is bit-identical for any
+//!   thread count. Within a band the pixels are visited tile by tile (neighbouring rays one after
+//!   the other, so that their samples share cache lines); the visiting order changes no bit
+//!   because no pixel reads another's result.
 
 pub mod siddon;
 pub mod trilinear;
@@ -103,12 +106,20 @@ impl<'a, R: Real> Projector<'a, R> {
         check_view(&self.grid, &cam, angle)?;
         let (w, h) = (cam.width, cam.height);
         let mut data = vec![R::zero(); w * h];
+        let setup = trilinear::Setup::new(&self.grid, self.geo.accuracy);
+        let cols_inner = cols_inner(&self.grid, &cam);
         let hits: Vec<usize> = data
-            .par_chunks_mut(w)
+            .par_chunks_mut(w * BAND)
             .enumerate()
-            .map(|(row, out)| match self.method {
-                Method::Siddon => siddon::row(&self.grid, &cam, row, out),
-                Method::Trilinear => trilinear::row(&self.grid, &cam, self.geo.accuracy, row, out),
+            .map(|(b, out)| match self.method {
+                Method::Siddon => for_each_pixel(out, w, b * BAND, TILE, cols_inner, |col, row| {
+                    siddon::pixel(&self.grid, &cam, col, row)
+                }),
+                Method::Trilinear => {
+                    for_each_pixel(out, w, b * BAND, TILE, cols_inner, |col, row| {
+                        trilinear::pixel(&self.grid, &setup, &cam, col, row)
+                    })
+                }
             })
             .collect();
         if hits.iter().sum::<usize>() == 0 {
@@ -127,6 +138,67 @@ impl<'a, R: Real> Projector<'a, R> {
         }
         Ok(Image2d::from_vec(w, h, data))
     }
+}
+
+/// Whether to visit the pixels of a tile row by row (columns inner) rather than column by
+/// column: the detector axis along which neighbouring rays share more cache lines goes inner.
+/// This only orders the work (speed); the pixel values do not depend on it.
+fn cols_inner<R: Real>(grid: &Grid<R>, cam: &Camera) -> bool {
+    // Cache lines (16 f32 values along x, one along y or z) crossed per pixel step along a
+    // detector axis with world direction `e` and pitch `p` (magnification ignored: it scales
+    // both axes alike).
+    let lines = |e: [f64; 3], p: f64| {
+        (e[0] * p / grid.s[0]).abs() / 16.0
+            + (e[1] * p / grid.s[1]).abs()
+            + (e[2] * p / grid.s[2]).abs()
+    };
+    lines(cam.rot[0], cam.pitch[1]) <= lines(cam.rot[1], cam.pitch[0])
+}
+
+/// Image rows per parallel task. With a tile of `BAND` x `TILE` rays the voxels read by one tile
+/// fit in a core's cache, whereas one whole row of rays crossing the volume along its fast axis
+/// (the lateral view) reads a slab of about 2 MB that is gone before the next row reuses it.
+/// Measured on the 512 x 512 x 133 CT: trilinear lateral view 0.70 -> 0.39 s CPU.
+const BAND: usize = 8;
+/// Columns per tile.
+const TILE: usize = 32;
+
+/// Fill the band `out` (whole image rows, the first one being `row0`, `w` pixels each) with
+/// `f(col, row) = (value, hit)` tile by tile: for each block of `tile` columns, row by row
+/// (`cols_inner`) or column by column. Returns the number of hits. Each pixel is written once
+/// from its own ray, so the order is free.
+#[inline]
+fn for_each_pixel<R: Real>(
+    out: &mut [R],
+    w: usize,
+    row0: usize,
+    tile: usize,
+    cols_inner: bool,
+    f: impl Fn(usize, usize) -> (R, bool),
+) -> usize {
+    let rows = out.len() / w;
+    let mut hits = 0;
+    for c0 in (0..w).step_by(tile) {
+        let c1 = (c0 + tile).min(w);
+        if cols_inner {
+            for r in 0..rows {
+                for col in c0..c1 {
+                    let (v, hit) = f(col, row0 + r);
+                    out[r * w + col] = v;
+                    hits += hit as usize;
+                }
+            }
+        } else {
+            for col in c0..c1 {
+                for r in 0..rows {
+                    let (v, hit) = f(col, row0 + r);
+                    out[r * w + col] = v;
+                    hits += hit as usize;
+                }
+            }
+        }
+    }
+    hits
 }
 
 /// The voxel grid as the ray-marchers see it.

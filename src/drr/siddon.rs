@@ -13,21 +13,15 @@ use super::{clip_ray, Grid};
 use crate::geometry::Camera;
 use crate::real::Real;
 
-/// Integrate every pixel of detector row `row` into `out` (length = image width); returns the
-/// number of rays that met the volume box.
-pub(crate) fn row<R: Real>(grid: &Grid<R>, cam: &Camera, row: usize, out: &mut [R]) -> usize {
-    let mut hits = 0;
-    for (col, px) in out.iter_mut().enumerate() {
-        let (o, d) = cam.pixel_ray(col as f64, row as f64);
-        *px = match clip_ray(cam, o, d, grid.lo, grid.hi) {
-            Some((t0, _)) => {
-                hits += 1;
-                integrate(grid, o, d, t0)
-            }
-            None => R::zero(),
-        };
+/// The line integral of the ray through pixel (`col`, `row`), and whether that ray met the
+/// volume box.
+#[inline]
+pub(crate) fn pixel<R: Real>(grid: &Grid<R>, cam: &Camera, col: usize, row: usize) -> (R, bool) {
+    let (o, d) = cam.pixel_ray(col as f64, row as f64);
+    match clip_ray(cam, o, d, grid.lo, grid.hi) {
+        Some((t0, _)) => (integrate(grid, o, d, t0), true),
+        None => (R::zero(), false),
     }
-    hits
 }
 
 /// The line integral along `o + t d` from the box entry `t_in` to the box exit.

@@ -26,39 +26,34 @@ use super::{clip_ray, Grid};
 use crate::geometry::{Camera, Mode};
 use crate::real::Real;
 
-/// Integrate every pixel of detector row `row` into `out` (length = image width); returns the
-/// number of rays that met the volume box.
-pub(crate) fn row<R: Real>(
+/// The ray-march of the ray through pixel (`col`, `row`), and whether that ray met the volume
+/// box.
+#[inline]
+pub(crate) fn pixel<R: Real>(
     grid: &Grid<R>,
+    setup: &Setup,
     cam: &Camera,
-    accuracy: f64,
+    col: usize,
     row: usize,
-    out: &mut [R],
-) -> usize {
-    let h0 = accuracy * grid.s[0].min(grid.s[1]).min(grid.s[2]);
-    let setup = Setup::new(grid);
-    let mut hits = 0;
-    for (col, px) in out.iter_mut().enumerate() {
-        let (o, d) = cam.pixel_ray(col as f64, row as f64);
-        if clip_ray(cam, o, d, grid.lo, grid.hi).is_some() {
-            hits += 1;
+) -> (R, bool) {
+    let (o, d) = cam.pixel_ray(col as f64, row as f64);
+    let hit = clip_ray(cam, o, d, grid.lo, grid.hi).is_some();
+    // Source (or source plane) to pixel distance along the ray.
+    let len = match cam.mode {
+        Mode::Cone => {
+            let z = cam.rot[2];
+            cam.dsd / (z[0] * d[0] + z[1] * d[1] + z[2] * d[2])
         }
-        // Source (or source plane) to pixel distance along the ray.
-        let len = match cam.mode {
-            Mode::Cone => {
-                let z = cam.rot[2];
-                cam.dsd / (z[0] * d[0] + z[1] * d[1] + z[2] * d[2])
-            }
-            Mode::Parallel => cam.dsd,
-        };
-        let h = len / (len / h0).ceil();
-        *px = integrate(grid, &setup, cam, o, d, h);
-    }
-    hits
+        Mode::Parallel => cam.dsd,
+    };
+    let h = len / (len / setup.h0).ceil();
+    (integrate(grid, setup, cam, o, d, h), hit)
 }
 
 /// Per-volume constants.
 pub(crate) struct Setup {
+    /// Largest step allowed, `accuracy x min(dVoxel)` (mm).
+    h0: f64,
     /// Box where the zero-padded interpolant can be non-zero (box + half a voxel).
     outer: ([f64; 3], [f64; 3]),
     /// Box of voxel centres (all 8 neighbours inside), or `None` if an axis has 1 voxel.
@@ -66,7 +61,7 @@ pub(crate) struct Setup {
 }
 
 impl Setup {
-    pub(crate) fn new<R: Real>(grid: &Grid<R>) -> Self {
+    pub(crate) fn new<R: Real>(grid: &Grid<R>, accuracy: f64) -> Self {
         let mut olo = [0.0; 3];
         let mut ohi = [0.0; 3];
         let mut ilo = [0.0; 3];
@@ -78,6 +73,7 @@ impl Setup {
             ihi[a] = grid.hi[a] - grid.s[a] / 2.0;
         }
         Setup {
+            h0: accuracy * grid.s[0].min(grid.s[1]).min(grid.s[2]),
             outer: (olo, ohi),
             inner: grid.n.iter().all(|&n| n >= 2).then_some((ilo, ihi)),
         }
