@@ -16,8 +16,6 @@
 mod common;
 use common::golden::*;
 
-use std::path::Path;
-
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde_json::{json, Value};
@@ -323,71 +321,17 @@ fn compute(folder: &str, inputs: &Value) -> Value {
     }
 }
 
-fn compare(path: &Path, key: &str, got: &Value, want: &Value, abs: f64, rel: f64) {
-    match (got, want) {
-        (Value::Object(a), Value::Object(b)) => {
-            assert_eq!(
-                a.keys().collect::<Vec<_>>(),
-                b.keys().collect::<Vec<_>>(),
-                "{}: keys of `{key}`",
-                path.display()
-            );
-            for (k, x) in a {
-                compare(path, k, x, &b[k], abs, rel);
-            }
-        }
-        (Value::Array(a), Value::Array(b)) => {
-            assert_eq!(a.len(), b.len(), "{}: `{key}` length", path.display());
-            for (x, y) in a.iter().zip(b) {
-                compare(path, key, x, y, abs, rel);
-            }
-        }
-        (Value::Number(x), Value::Number(y)) => {
-            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
-            assert!(
-                (x - y).abs() <= abs + rel * y.abs(),
-                "{}: `{key}`: got {x:e}, golden {y:e}",
-                path.display()
-            );
-        }
-        _ => assert_eq!(got, want, "{}: `{key}`", path.display()),
-    }
-}
-
-fn read(folder: &str, stem: &str) -> Value {
-    let p = root()
-        .join("golden")
-        .join(folder)
-        .join(format!("{stem}.json"));
-    let text = std::fs::read_to_string(&p).unwrap_or_else(|e| {
-        panic!(
-            "{}: {e} (regenerate with UNISPINE_REGEN_GOLDEN=1)",
-            p.display()
-        )
-    });
-    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
-}
-
 /// With `UNISPINE_REGEN_GOLDEN=1`, write every file once (before any test of this file reads
 /// them, whichever test gets here first).
 fn regenerate_if_asked() {
     static ONCE: std::sync::Once = std::sync::Once::new();
-    if !std::env::var("UNISPINE_REGEN_GOLDEN").is_ok_and(|v| v == "1") {
+    if !regen_requested() {
         return;
     }
     ONCE.call_once(|| {
         for (folder, stem, mut c) in cases() {
-            let path = root()
-                .join("golden")
-                .join(folder)
-                .join(format!("{stem}.json"));
             c["outputs"] = compute(folder, &c["inputs"]);
-            let mut s = String::new();
-            write_value(&mut s, &c, 0);
-            s.push('\n');
-            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-            std::fs::write(&path, s).unwrap();
-            println!("wrote {}", path.display());
+            write_case(folder, stem, &c);
         }
     });
 }
@@ -397,29 +341,7 @@ fn golden_files_match_the_rust_losses() {
     regenerate_if_asked();
     let mut checked = 0;
     for (folder, stem, _) in cases() {
-        let path = root()
-            .join("golden")
-            .join(folder)
-            .join(format!("{stem}.json"));
-        let file = read(folder, stem);
-        for key in [
-            "equation",
-            "description",
-            "inputs",
-            "outputs",
-            "tolerance",
-            "checked_by",
-        ] {
-            assert!(
-                file.get(key).is_some(),
-                "{}: missing `{key}`",
-                path.display()
-            );
-        }
-        let got = compute(folder, &file["inputs"]);
-        let abs = file["tolerance"]["abs"].as_f64().unwrap();
-        let rel = file["tolerance"]["rel"].as_f64().unwrap();
-        compare(&path, "outputs", &got, &file["outputs"], abs, rel);
+        check_case(folder, stem, |inputs| compute(folder, inputs));
         checked += 1;
     }
     assert_eq!(checked, 11);
@@ -430,21 +352,24 @@ fn golden_cases_exercise_what_they_claim() {
     regenerate_if_asked();
     let num = |v: &Value, k: &str| v["outputs"][k].as_f64().unwrap();
     // tau clamped to 0.98 in the constant 3x3 case; adaptive and below the clamp elsewhere.
-    assert_eq!(num(&read("eq06-spwm-prior", "tau-clamped"), "tau"), 0.98);
-    let s = read("eq06-spwm-prior", "structured");
+    assert_eq!(
+        num(&read_case("eq06-spwm-prior", "tau-clamped"), "tau"),
+        0.98
+    );
+    let s = read_case("eq06-spwm-prior", "structured");
     let tau = num(&s, "tau");
     assert!(tau > 0.05 && tau < 0.98, "{tau}");
-    assert_eq!(num(&read("eq06-spwm-prior", "fixed-tau"), "tau"), 0.4);
+    assert_eq!(num(&read_case("eq06-spwm-prior", "fixed-tau"), "tau"), 0.4);
     // The clamped-linear gate has zeros and positive values; the sigmoid gate has neither 0 nor 1.
     let g = get_image(&s["outputs"], "gate");
     assert!(g.data.contains(&0.0) && g.data.iter().any(|&x| x > 0.5));
     let sg = get_image(
-        &read("eq06-spwm-prior", "sigmoid-gate-even-kernel")["outputs"],
+        &read_case("eq06-spwm-prior", "sigmoid-gate-even-kernel")["outputs"],
         "gate",
     );
     assert!(sg.data.iter().all(|&x| x > 0.0 && x < 1.0));
     // Warm-up: r = 0, 0, 1/2, 1, 1 at the golden iterations.
-    let w = read("eq07-spwm-weights", "warmup");
+    let w = read_case("eq07-spwm-weights", "warmup");
     let r: Vec<f64> = w["outputs"]["r"]["data"]
         .as_array()
         .unwrap()
@@ -453,7 +378,7 @@ fn golden_cases_exercise_what_they_claim() {
         .collect();
     assert_eq!(r, vec![0.0, 0.0, 0.5, 1.0, 1.0]);
     // The L1 case has zero residuals (the subgradient convention is pinned).
-    let l = read("eq08-hybrid-loss", "l1-dssim");
+    let l = read_case("eq08-hybrid-loss", "l1-dssim");
     let (re, gt) = (
         get_image(&l["inputs"], "render"),
         get_image(&l["inputs"], "gt"),
@@ -464,29 +389,5 @@ fn golden_cases_exercise_what_they_claim() {
 #[test]
 fn numpy_reference_agrees() {
     regenerate_if_asked();
-    let ci = std::env::var("CI").is_ok_and(|v| v == "true");
-    let have = std::process::Command::new("python3")
-        .args(["-c", "import numpy"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !have {
-        assert!(
-            !ci,
-            "CI=true but python3 with numpy is not available for tools/loss_reference.py"
-        );
-        println!("note: python3 + numpy not available; skipping tools/loss_reference.py");
-        return;
-    }
-    let out = std::process::Command::new("python3")
-        .arg("tools/loss_reference.py")
-        .current_dir(root())
-        .output()
-        .unwrap();
-    let text =
-        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    println!("{text}");
-    assert!(
-        out.status.success(),
-        "tools/loss_reference.py failed:\n{text}"
-    );
+    run_numpy_reference("tools/loss_reference.py");
 }

@@ -14,8 +14,6 @@
 mod common;
 use common::golden::*;
 
-use std::path::Path;
-
 use serde_json::{json, Value};
 use unispine::gaussians::model::N_FEATURES;
 use unispine::gaussians::Gaussians;
@@ -309,80 +307,15 @@ fn compute(folder: &str, stem: &str, inputs: &Value) -> Value {
     }
 }
 
-fn compare(path: &Path, got: &Value, want: &Value, abs: f64, rel: f64) {
-    match (got, want) {
-        (Value::Object(a), Value::Object(b)) => {
-            assert_eq!(
-                a.keys().collect::<Vec<_>>(),
-                b.keys().collect::<Vec<_>>(),
-                "{}: output keys",
-                path.display()
-            );
-            for (k, x) in a {
-                compare(path, x, &b[k], abs, rel);
-            }
-        }
-        (Value::Array(a), Value::Array(b)) => {
-            assert_eq!(a.len(), b.len(), "{}: array length", path.display());
-            for (x, y) in a.iter().zip(b) {
-                compare(path, x, y, abs, rel);
-            }
-        }
-        (Value::Number(x), Value::Number(y)) => {
-            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
-            assert!(
-                (x - y).abs() <= abs + rel * y.abs(),
-                "{}: got {x:e}, golden {y:e}",
-                path.display()
-            );
-        }
-        _ => assert_eq!(got, want, "{}", path.display()),
-    }
-}
-
 #[test]
 fn golden_files_match_the_rust_projection() {
-    let regen = std::env::var("UNISPINE_REGEN_GOLDEN").is_ok_and(|v| v == "1");
     let mut checked = 0;
     for (folder, stem, mut c) in cases() {
-        let path = root()
-            .join("golden")
-            .join(folder)
-            .join(format!("{stem}.json"));
-        if regen {
+        if regen_requested() {
             c["outputs"] = compute(folder, stem, &c["inputs"]);
-            let mut s = String::new();
-            write_value(&mut s, &c, 0);
-            s.push('\n');
-            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-            std::fs::write(&path, s).unwrap();
-            println!("wrote {}", path.display());
+            write_case(folder, stem, &c);
         }
-        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| {
-            panic!(
-                "{}: {e} (regenerate with UNISPINE_REGEN_GOLDEN=1)",
-                path.display()
-            )
-        });
-        let file: Value = serde_json::from_str(&text).unwrap();
-        for key in [
-            "equation",
-            "description",
-            "inputs",
-            "outputs",
-            "tolerance",
-            "checked_by",
-        ] {
-            assert!(
-                file.get(key).is_some(),
-                "{}: missing `{key}`",
-                path.display()
-            );
-        }
-        let got = compute(folder, stem, &file["inputs"]);
-        let abs = file["tolerance"]["abs"].as_f64().unwrap();
-        let rel = file["tolerance"]["rel"].as_f64().unwrap();
-        compare(&path, &got, &file["outputs"], abs, rel);
+        check_case(folder, stem, |inputs| compute(folder, stem, inputs));
         checked += 1;
     }
     assert_eq!(checked, 7);
@@ -392,10 +325,7 @@ fn golden_files_match_the_rust_projection() {
 fn golden_cases_exercise_every_branch() {
     // The eq03 files must contain visible, clamped and culled Gaussians, and the xgaussian
     // file clamped and unclamped intensities; otherwise they would not test what they claim.
-    let read = |f: &str, s: &str| -> Value {
-        let p = root().join("golden").join(f).join(format!("{s}.json"));
-        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
-    };
+    let read = read_case;
     let r = read("eq03-projection", "cone-centred");
     let (_, radius) = get_arr(&r["outputs"], "radius");
     assert_eq!(&radius[3..], &[0.0, 0.0, 0.0]);
@@ -422,29 +352,5 @@ fn golden_cases_exercise_every_branch() {
 
 #[test]
 fn numpy_reference_agrees() {
-    let ci = std::env::var("CI").is_ok_and(|v| v == "true");
-    let have = std::process::Command::new("python3")
-        .args(["-c", "import numpy"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !have {
-        assert!(
-            !ci,
-            "CI=true but python3 with numpy is not available for tools/golden_reference.py"
-        );
-        println!("note: python3 + numpy not available; skipping tools/golden_reference.py");
-        return;
-    }
-    let out = std::process::Command::new("python3")
-        .arg("tools/golden_reference.py")
-        .current_dir(root())
-        .output()
-        .unwrap();
-    let text =
-        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    println!("{text}");
-    assert!(
-        out.status.success(),
-        "tools/golden_reference.py failed:\n{text}"
-    );
+    run_numpy_reference("tools/golden_reference.py");
 }

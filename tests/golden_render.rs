@@ -16,8 +16,6 @@
 mod common;
 use common::golden::*;
 
-use std::path::Path;
-
 use serde_json::{json, Value};
 use unispine::gaussians::Gaussians;
 use unispine::geometry::{ConeBeam, Mode};
@@ -222,79 +220,15 @@ fn compute(inputs: &Value) -> Value {
     })
 }
 
-fn compare(path: &Path, got: &Value, want: &Value, abs: f64, rel: f64) {
-    match (got, want) {
-        (Value::Object(a), Value::Object(b)) => {
-            assert_eq!(
-                a.keys().collect::<Vec<_>>(),
-                b.keys().collect::<Vec<_>>(),
-                "{}: output keys",
-                path.display()
-            );
-            for (k, x) in a {
-                compare(path, x, &b[k], abs, rel);
-            }
-        }
-        (Value::Array(a), Value::Array(b)) => {
-            assert_eq!(a.len(), b.len(), "{}: array length", path.display());
-            for (x, y) in a.iter().zip(b) {
-                compare(path, x, y, abs, rel);
-            }
-        }
-        (Value::Number(x), Value::Number(y)) => {
-            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
-            assert!(
-                (x - y).abs() <= abs + rel * y.abs(),
-                "{}: got {x:e}, golden {y:e}",
-                path.display()
-            );
-        }
-        _ => assert_eq!(got, want, "{}", path.display()),
-    }
-}
-
 #[test]
 fn golden_files_match_the_rust_render() {
-    let regen = std::env::var("UNISPINE_REGEN_GOLDEN").is_ok_and(|v| v == "1");
     let mut checked = 0;
     for (stem, mut c) in cases() {
-        let path = root()
-            .join("golden/eq04-05-render")
-            .join(format!("{stem}.json"));
-        if regen {
+        if regen_requested() {
             c["outputs"] = compute(&c["inputs"]);
-            let mut s = String::new();
-            write_value(&mut s, &c, 0);
-            s.push('\n');
-            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-            std::fs::write(&path, s).unwrap();
-            println!("wrote {}", path.display());
+            write_case("eq04-05-render", stem, &c);
         }
-        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| {
-            panic!(
-                "{}: {e} (regenerate with UNISPINE_REGEN_GOLDEN=1)",
-                path.display()
-            )
-        });
-        let file: Value = serde_json::from_str(&text).unwrap();
-        for key in [
-            "equation",
-            "description",
-            "inputs",
-            "outputs",
-            "tolerance",
-            "checked_by",
-        ] {
-            assert!(
-                file.get(key).is_some(),
-                "{}: missing `{key}`",
-                path.display()
-            );
-        }
-        let got = compute(&file["inputs"]);
-        let abs = file["tolerance"]["abs"].as_f64().unwrap();
-        let rel = file["tolerance"]["rel"].as_f64().unwrap();
-        compare(&path, &got, &file["outputs"], abs, rel);
+        check_case("eq04-05-render", stem, compute);
         checked += 1;
     }
     assert_eq!(checked, 3);
@@ -365,29 +299,5 @@ fn golden_cases_exercise_every_branch() {
 
 #[test]
 fn numpy_render_reference_agrees() {
-    let ci = std::env::var("CI").is_ok_and(|v| v == "true");
-    let have = std::process::Command::new("python3")
-        .args(["-c", "import numpy"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !have {
-        assert!(
-            !ci,
-            "CI=true but python3 with numpy is not available for tools/render_reference.py"
-        );
-        println!("note: python3 + numpy not available; skipping tools/render_reference.py");
-        return;
-    }
-    let out = std::process::Command::new("python3")
-        .arg("tools/render_reference.py")
-        .current_dir(root())
-        .output()
-        .unwrap();
-    let text =
-        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    println!("{text}");
-    assert!(
-        out.status.success(),
-        "tools/render_reference.py failed:\n{text}"
-    );
+    run_numpy_reference("tools/render_reference.py");
 }
