@@ -16,14 +16,15 @@ Written from the equations, not from the Rust code:
 
 Usage: python3 tools/golden_reference.py   (from the repository root)
 """
-import json
 import math
 import pathlib
 import sys
 
 import numpy as np
 
-ROOT = pathlib.Path(__file__).resolve().parent.parent / "golden"
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from golden_io import arr, check_folders  # noqa: E402
+
 
 # Real SH constants with the signs of the 3DGS evaluation order.
 PI = math.pi
@@ -46,10 +47,6 @@ C3 = [
     -math.sqrt(35.0 / (2.0 * PI)) / 4.0,
 ]
 LAMBDA = np.array([C0, -C1, C1, -C1] + C2 + C3)
-
-
-def arr(v):
-    return np.array(v["data"], dtype=np.float64).reshape(v["shape"])
 
 
 def rotation(q):
@@ -180,45 +177,8 @@ def run_case(folder, stem, inp):
     raise ValueError(f"unknown folder {folder}")
 
 
-def golden_value(v):
-    if isinstance(v, dict):
-        return arr(v)
-    return np.asarray(v, dtype=np.float64)
-
-
 def main():
-    failures = 0
-    n_cases = 0
-    for folder in ["eq01-covariance", "eq02-rirf", "eq03-projection"]:
-        files = sorted((ROOT / folder).glob("*.json"))
-        if not files:
-            print(f"FAIL {folder}: no golden files")
-            failures += 1
-        for path in files:
-            case = json.loads(path.read_text())
-            tol_abs, tol_rel = case["tolerance"]["abs"], case["tolerance"]["rel"]
-            ref = run_case(folder, path.stem, case["inputs"])
-            if set(ref) != set(case["outputs"]):
-                print(f"FAIL {path.name}: outputs {sorted(case['outputs'])} vs {sorted(ref)}")
-                failures += 1
-                continue
-            n_cases += 1
-            for key, mine in ref.items():
-                gold = golden_value(case["outputs"][key])
-                if gold.shape != mine.shape:
-                    print(f"FAIL {folder}/{path.name} {key}: shape {gold.shape} vs {mine.shape}")
-                    failures += 1
-                    continue
-                err = np.abs(mine - gold)
-                bad = err > tol_abs + tol_rel * np.abs(gold)
-                scale = max(np.abs(gold).max(), 1e-300)
-                status = "FAIL" if bad.any() else "ok  "
-                print(f"{status} {folder}/{path.name} {key}: max |diff| {err.max():.3e} "
-                      f"(max-abs-normalised {err.max() / scale:.3e})")
-                if bad.any():
-                    failures += 1
-    print(f"{n_cases} cases, {failures} failures")
-    return 1 if failures else 0
+    return check_folders(["eq01-covariance", "eq02-rirf", "eq03-projection"], run_case)
 
 
 if __name__ == "__main__":

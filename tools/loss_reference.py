@@ -20,14 +20,15 @@ train.py), not from the Rust code, and by other means:
 
 Usage: python3 tools/loss_reference.py   (from the repository root)
 """
-import json
 import pathlib
 import sys
 
 import numpy as np
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from golden_io import arr, check_folders  # noqa: E402
 from numpy.lib.stride_tricks import sliding_window_view
 
-ROOT = pathlib.Path(__file__).resolve().parent.parent / "golden"
 FOLDERS = ["eq06-spwm-prior", "eq07-spwm-weights", "eq08-hybrid-loss", "eq09-weighted-charbonnier"]
 
 SOBEL_X = np.array([[-1.0, 0.0, 1.0], [-2.0, 0.0, 2.0], [-1.0, 0.0, 1.0]])
@@ -35,16 +36,6 @@ SOBEL_Y = np.array([[-1.0, -2.0, -1.0], [0.0, 0.0, 0.0], [1.0, 2.0, 1.0]])
 C1 = 0.01 ** 2
 C2 = 0.03 ** 2
 STEP = 1e-30
-
-
-def arr(v):
-    return np.array(v["data"], dtype=np.float64).reshape(v["shape"])
-
-
-def golden_value(v):
-    if isinstance(v, dict):
-        return arr(v)
-    return np.asarray(v, dtype=np.float64)
 
 
 def correlate2d(img, kernel):
@@ -192,39 +183,7 @@ def run_case(folder, inputs):
 
 
 def main():
-    failures = 0
-    n_cases = 0
-    for folder in FOLDERS:
-        files = sorted((ROOT / folder).glob("*.json"))
-        if not files:
-            print(f"FAIL {folder}: no golden files")
-            failures += 1
-        for path in files:
-            case = json.loads(path.read_text())
-            tol_abs, tol_rel = case["tolerance"]["abs"], case["tolerance"]["rel"]
-            ref = run_case(folder, case["inputs"])
-            if set(ref) != set(case["outputs"]):
-                print(f"FAIL {path.name}: outputs {sorted(case['outputs'])} vs {sorted(ref)}")
-                failures += 1
-                continue
-            n_cases += 1
-            for key, mine in ref.items():
-                gold = golden_value(case["outputs"][key])
-                mine = np.asarray(mine, dtype=np.float64)
-                if gold.shape != mine.shape:
-                    print(f"FAIL {folder}/{path.name} {key}: shape {gold.shape} vs {mine.shape}")
-                    failures += 1
-                    continue
-                err = np.abs(mine - gold)
-                bad = err > tol_abs + tol_rel * np.abs(gold)
-                scale = max(np.abs(gold).max(), 1e-300)
-                status = "FAIL" if bad.any() else "ok  "
-                print(f"{status} {folder}/{path.name} {key}: max |diff| {err.max():.3e} "
-                      f"(max-abs-normalised {err.max() / scale:.3e})")
-                if bad.any():
-                    failures += 1
-    print(f"{n_cases} cases, {failures} failures")
-    return 1 if failures else 0
+    return check_folders(FOLDERS, lambda folder, _stem, inputs: run_case(folder, inputs))
 
 
 if __name__ == "__main__":

@@ -24,7 +24,6 @@ Written from the equations, not from the Rust code:
 
 Usage: python3 tools/render_reference.py   (from the repository root)
 """
-import json
 import math
 import pathlib
 import sys
@@ -33,14 +32,10 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import golden_reference as gr  # noqa: E402
+from golden_io import arr, check_folders  # noqa: E402
 
-ROOT = pathlib.Path(__file__).resolve().parent.parent / "golden" / "eq04-05-render"
 TILE = 16
 GROUPS = ["means", "log_scales", "quats", "opacity_logits", "features"]
-
-
-def arr(v):
-    return np.array(v["data"], dtype=np.float64).reshape(v["shape"])
 
 
 def intensity(mode, k, f, mean, centre):
@@ -145,35 +140,7 @@ def run_case(inp):
 
 
 def main():
-    failures = 0
-    files = sorted(ROOT.glob("*.json"))
-    if not files:
-        print(f"FAIL {ROOT}: no golden files")
-        return 1
-    for path in files:
-        case = json.loads(path.read_text())
-        tol_abs, tol_rel = case["tolerance"]["abs"], case["tolerance"]["rel"]
-        ref = run_case(case["inputs"])
-        if set(ref) != set(case["outputs"]):
-            print(f"FAIL {path.name}: outputs {sorted(case['outputs'])} vs {sorted(ref)}")
-            failures += 1
-            continue
-        for key, mine in ref.items():
-            gold = arr(case["outputs"][key])
-            if gold.shape != mine.shape:
-                print(f"FAIL {path.name} {key}: shape {gold.shape} vs {mine.shape}")
-                failures += 1
-                continue
-            err = np.abs(mine - gold)
-            bad = err > tol_abs + tol_rel * np.abs(gold)
-            scale = max(np.abs(gold).max(), 1e-300)
-            status = "FAIL" if bad.any() else "ok  "
-            print(f"{status} eq04-05-render/{path.name} {key}: max |diff| {err.max():.3e} "
-                  f"(max-abs-normalised {err.max() / scale:.3e})")
-            if bad.any():
-                failures += 1
-    print(f"{len(files)} cases, {failures} failures")
-    return 1 if failures else 0
+    return check_folders(["eq04-05-render"], lambda _folder, _stem, inputs: run_case(inputs))
 
 
 if __name__ == "__main__":
