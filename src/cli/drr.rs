@@ -18,7 +18,8 @@ use anyhow::{bail, Context};
 use ndarray::Array3;
 
 use crate::cli::progress::Progress;
-use crate::cli::render::{write_png, Precision};
+use crate::cli::render::Precision;
+use crate::dataset::store::write_png;
 use crate::drr::{self, Method};
 use crate::geometry::ConeBeam;
 use crate::image2d::Image2d;

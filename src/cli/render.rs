@@ -193,7 +193,7 @@ fn render_and_write<R: Real>(
     let arr = Array2::from_shape_vec((img.height, img.width), img32.clone())?;
     let npy = args.out.join("image.npy");
     ndarray_npy::write_npy(&npy, &arr).with_context(|| format!("writing {}", npy.display()))?;
-    write_png(
+    crate::dataset::store::write_png(
         &args.out.join("image.png"),
         &Image2d::from_vec(img.width, img.height, img32),
     )?;
@@ -252,26 +252,5 @@ fn write_grads<R: Real>(path: &Path, d: &Gaussians<R>, n_rest: usize) -> anyhow:
     npz.add_array("scale", &scale)?;
     npz.add_array("rot", &rot)?;
     npz.finish()?;
-    Ok(())
-}
-
-/// An image min-max scaled to 8 bits (constant images are black).
-pub fn write_png(path: &Path, img: &Image2d<f32>) -> anyhow::Result<()> {
-    let (lo, hi) = img
-        .data
-        .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
-            (l.min(v), h.max(v))
-        });
-    let scale = if hi > lo { 255.0 / (hi - lo) } else { 0.0 };
-    let px: Vec<u8> = img
-        .data
-        .iter()
-        .map(|&v| ((v - lo) * scale).round().clamp(0.0, 255.0) as u8)
-        .collect();
-    image::GrayImage::from_raw(img.width as u32, img.height as u32, px)
-        .context("image buffer size")?
-        .save(path)
-        .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }
