@@ -31,8 +31,6 @@ const ITERS: [usize; 5] = [0, 2000, 4500, 7000, 9000];
 const H: usize = 14;
 const W: usize = 19;
 
-// ---------------------------------------------------------------- JSON helpers
-
 // ---------------------------------------------------------------- the inputs
 
 /// A GT-like view in [0, 1]: a bright disc (a "vertebra"), a vertical bar, a ramp and noise.
@@ -75,17 +73,16 @@ fn render_near(gt: &Image2d<f64>, seed: u64, lo: f64, hi: f64, zeros: usize) -> 
 }
 
 fn case(equation: &str, description: &str, inputs: Value) -> Value {
-    json!({
-        "equation": equation,
-        "description": description,
-        "inputs": inputs,
-        "outputs": {},
-        "tolerance": { "abs": TOL_ABS, "rel": TOL_REL },
-        "checked_by": "tools/loss_reference.py (independent numpy implementation written from \
+    new_case(
+        equation,
+        description,
+        inputs,
+        [TOL_ABS, TOL_REL],
+        "tools/loss_reference.py (independent numpy implementation written from \
                        the equations and the UniSpine-GS code description: dense 2D zero-padded \
                        correlations, numpy.quantile, gradients by the complex-step derivative); \
                        f64 finite differences of every gradient in tests/loss_gradcheck.rs",
-    })
+    )
 }
 
 const EQ6: &str = "E = sqrt(gx^2 + gy^2 + 1e-6) (Sobel, cross-correlation, zero padding 1); \

@@ -25,22 +25,19 @@ use unispine::render::{ColorMode, RenderSettings};
 const TOL: f64 = 1e-10;
 const ACTIVE: [usize; 4] = [1, 4, 9, 16];
 
-// ---------------------------------------------------------------- JSON helpers
-
 // ---------------------------------------------------------------- the cases
 
 fn case(equation: &str, description: &str, inputs: Value) -> Value {
-    json!({
-        "equation": equation,
-        "description": description,
-        "inputs": inputs,
-        "outputs": {},
-        "tolerance": { "abs": TOL, "rel": TOL },
-        "checked_by": "tools/golden_reference.py (independent numpy implementation written from \
+    new_case(
+        equation,
+        description,
+        inputs,
+        [TOL, TOL],
+        "tools/golden_reference.py (independent numpy implementation written from \
                        the equations: rotation by Rodrigues' formula, SH constants from their \
                        closed forms, camera built from the TIGRE geometry); FD of the backward \
                        pass in src/render/project/tests.rs",
-    })
+    )
 }
 
 fn geometry(mode: Mode, n_det: [usize; 2], pitch: [f64; 2], off: [f64; 2]) -> ConeBeam {

@@ -27,8 +27,6 @@ use unispine::render::{self, composite, ColorMode, RenderSettings};
 const TOL_ABS: f64 = 1e-8;
 const TOL_REL: f64 = 1e-8;
 
-// ---------------------------------------------------------------- JSON helpers
-
 fn geometry(mode: Mode, n_det: [usize; 2], pitch: f64, off: [f64; 2]) -> ConeBeam {
     ConeBeam {
         dsd: 1500.0,

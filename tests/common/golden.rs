@@ -87,6 +87,24 @@ pub fn image_value(im: &Image2d<f64>) -> Value {
     arr(&[im.height, im.width], im.data.clone())
 }
 
+/// A case in the golden format with empty outputs (filled when the files are regenerated).
+pub fn new_case(
+    equation: &str,
+    description: &str,
+    inputs: Value,
+    tol: [f64; 2],
+    checked_by: &str,
+) -> Value {
+    json!({
+        "equation": equation,
+        "description": description,
+        "inputs": inputs,
+        "outputs": {},
+        "tolerance": { "abs": tol[0], "rel": tol[1] },
+        "checked_by": checked_by,
+    })
+}
+
 /// `golden/<folder>/<stem>.json`.
 pub fn case_path(folder: &str, stem: &str) -> PathBuf {
     root()
