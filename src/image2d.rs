@@ -36,6 +36,25 @@ impl<R: Real> Image2d<R> {
         self.data[row * self.width + col]
     }
 
+    /// The pixel-wise image f(self, other). Panics if the sizes differ (a programming error).
+    pub fn zip_map(&self, other: &Image2d<R>, f: impl Fn(R, R) -> R) -> Image2d<R> {
+        assert_eq!(
+            (self.width, self.height),
+            (other.width, other.height),
+            "image sizes"
+        );
+        Image2d {
+            width: self.width,
+            height: self.height,
+            data: self
+                .data
+                .iter()
+                .zip(&other.data)
+                .map(|(&a, &b)| f(a, b))
+                .collect(),
+        }
+    }
+
     /// The same image in another precision.
     pub fn cast<S: Real>(&self) -> Image2d<S> {
         Image2d {

@@ -203,26 +203,10 @@ pub fn attention<R: Real>(gt: &Image2d<R>, cfg: &SpwmConfig) -> Attention<R> {
     // Eq. (6): E, H, A.
     let (gx, gy) = sobel(gt);
     let eps = R::c(EDGE_EPS);
-    let edge = Image2d::from_vec(
-        gt.width,
-        gt.height,
-        gx.data
-            .iter()
-            .zip(&gy.data)
-            .map(|(&a, &b)| (a * a + b * b + eps).sqrt())
-            .collect(),
-    );
+    let edge = gx.zip_map(&gy, |a, b| (a * a + b * b + eps).sqrt());
     let k = gaussian_kernel(cfg.odd_blur_kernel(), cfg.blur_sigma, 1e-12);
     let bl = blur(gt, &k);
-    let high = Image2d::from_vec(
-        gt.width,
-        gt.height,
-        gt.data
-            .iter()
-            .zip(&bl.data)
-            .map(|(&x, &b)| (x - b).abs())
-            .collect(),
-    );
+    let high = gt.zip_map(&bl, |x, b| (x - b).abs());
     let lam = R::c(cfg.hf_lambda);
     let raw: Vec<R> = edge
         .data
@@ -270,16 +254,7 @@ pub fn attention<R: Real>(gt: &Image2d<R>, cfg: &SpwmConfig) -> Attention<R> {
 /// (computed once per view and cached).
 pub fn view_prior<R: Real>(gt: &Image2d<R>, cfg: &SpwmConfig) -> Image2d<R> {
     let at = attention(gt, cfg);
-    Image2d::from_vec(
-        gt.width,
-        gt.height,
-        at.gate
-            .data
-            .iter()
-            .zip(&at.attention.data)
-            .map(|(&g, &a)| g * a)
-            .collect(),
-    )
+    at.gate.zip_map(&at.attention, |g, a| g * a)
 }
 
 /// The weights w = 1 + alpha r(t) P of Eq. (7) at iteration `iter` from a cached [`view_prior`].
