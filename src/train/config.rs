@@ -260,6 +260,13 @@ impl TrainConfig {
         v
     }
 
+    /// Whether the test views are evaluated after (1-based) iteration `it`: the same set as
+    /// [`TrainConfig::eval_points`], without building it.
+    pub fn is_eval_point(&self, it: usize) -> bool {
+        (1..=self.iterations).contains(&it)
+            && (it == self.iterations || self.eval_iterations.contains(&it))
+    }
+
     /// Number of active features at (1-based) iteration `it`: 1, then one more SH band at every
     /// multiple of `feature_step_interval` (upstream `oneupSHdegree` at `iteration % 1000 == 0`).
     pub fn active_features(&self, it: usize) -> usize {
@@ -501,6 +508,12 @@ mod tests {
         assert_eq!(c.feature_step_interval, 100);
         assert_eq!(c.lr.position_max_steps, 2000);
         assert_eq!(c.eval_points(), vec![10, 200, 2000]);
+        let marked: Vec<usize> = (0..=2001).filter(|&it| c.is_eval_point(it)).collect();
+        assert_eq!(marked, c.eval_points());
+        c.eval_iterations = vec![0, 5, 3000];
+        let marked: Vec<usize> = (0..=3001).filter(|&it| c.is_eval_point(it)).collect();
+        assert_eq!(marked, vec![5, 2000]);
+        assert_eq!(marked, c.eval_points());
         assert!((c.spwm_time_scale - 10.0).abs() < 1e-12);
     }
 }

@@ -234,7 +234,7 @@ impl<'a> Trainer<'a> {
             return Err(diverged(format!("gradient on training view {view}: {e}")));
         }
         let psnr = eval::psnr(&eval::clamp01(&img), gt);
-        let eval = if cfg.eval_points().contains(&it) {
+        let eval = if cfg.is_eval_point(it) {
             Some(eval::evaluate(
                 &self.state.params,
                 self.ds,
