@@ -16,6 +16,8 @@
 
 // Foundations shared by every stage.
 pub mod error;
+/// Atomic file writes (temporary name + rename) and output-folder hygiene.
+pub mod fsio;
 pub mod image2d;
 pub mod math;
 pub mod par;

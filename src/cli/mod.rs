@@ -8,6 +8,7 @@ pub mod gradcheck;
 pub mod progress;
 pub mod render;
 pub mod report;
+pub mod signals;
 pub mod train;
 
 use clap::{Parser, Subcommand};
