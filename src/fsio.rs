@@ -147,7 +147,7 @@ mod tests {
         let v = d.path().join("volume.npy");
         std::fs::write(&v, b"x").unwrap();
         let dotted = d.path().join(".").join("volume.npy");
-        let e = check_not_output("--volume", &dotted, &[v.clone()]).unwrap_err();
+        let e = check_not_output("--volume", &dotted, std::slice::from_ref(&v)).unwrap_err();
         assert!(e.to_string().contains("--volume"), "{e}");
         assert!(check_not_output("--volume", &v, &[d.path().join("train.npy")]).is_ok());
     }

@@ -187,6 +187,29 @@ fn the_scored_model_is_the_saved_model() {
         );
     }
     assert_eq!(json(&run.join("metrics.json"))["iterations"], 2);
+
+    // A value that cannot work is refused before iteration 1, with its range, and a failure
+    // that is not a divergence names no checkpoint.
+    let out = bin()
+        .current_dir(root.path())
+        .args([
+            "train",
+            "--data",
+            "data",
+            "--out",
+            "run2",
+            "--position-lr-init",
+            "1e30",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("lr.position_init") && err.contains("(0, 1]"),
+        "{err}"
+    );
+    assert!(!err.contains("checkpoint"), "{err}");
 }
 
 fn quiet(_: &Event) {}
