@@ -4,24 +4,13 @@
 
 use unispine::dataset::{Dataset, Manifest, Split};
 use unispine::gaussians::Gaussians;
-use unispine::geometry::{ConeBeam, Mode};
+use unispine::geometry::ConeBeam;
 use unispine::render::{self, ColorMode, RenderSettings};
 use unispine::train::{Method, TrainConfig};
 
 pub fn geometry() -> ConeBeam {
     // 64 mm box, magnification 1.5 -> 96 mm on a 32 px detector at 3 mm.
-    ConeBeam {
-        dsd: 1500.0,
-        dso: 1000.0,
-        n_detector: [32, 32],
-        d_detector: [3.0, 3.0],
-        n_voxel: [32, 32, 32],
-        d_voxel: [2.0, 2.0, 2.0],
-        off_origin: [0.0; 3],
-        off_detector: [0.0; 2],
-        mode: Mode::Cone,
-        accuracy: 0.5,
-    }
+    ConeBeam::centred([32, 32], [3.0, 3.0], [32, 32, 32], [2.0, 2.0, 2.0])
 }
 
 pub fn hidden() -> Gaussians<f64> {
