@@ -20,6 +20,7 @@ pub mod image2d;
 pub mod math;
 pub mod par;
 pub mod real;
+pub mod simd;
 
 // The pipeline, in data-flow order (one stage per module).
 
