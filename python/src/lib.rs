@@ -480,6 +480,55 @@ fn golden_files() -> Vec<(&'static str, &'static str, &'static str)> {
     golden::FILES.to_vec()
 }
 
+/// For the overhead benchmark (`python/benches/overhead.py`): the wall time in seconds of each of
+/// `repeats` calls of the library's `render::forward` alone (no argument conversion), on the
+/// arguments of `rasterize` (float64 or float32, cameras from `geometry` + `angles`).
+#[pyfunction]
+#[pyo3(signature = (means, quats, log_scales, opacity_logits, features, *, geometry, angles, repeats))]
+#[allow(clippy::too_many_arguments)]
+fn _bench_render_forward<'py>(
+    py: Python<'py>,
+    means: &Bound<'py, PyAny>,
+    quats: &Bound<'py, PyAny>,
+    log_scales: &Bound<'py, PyAny>,
+    opacity_logits: &Bound<'py, PyAny>,
+    features: &Bound<'py, PyAny>,
+    geometry: &Bound<'py, PyAny>,
+    angles: &Bound<'py, PyAny>,
+    repeats: usize,
+) -> PyResult<Vec<f64>> {
+    let s = unispine::render::RenderSettings::default();
+    with_dtype!(args::dtype_of("means", means)?, R, {
+        let (g, cams) = gaussians_and_cameras::<R>(
+            means,
+            quats,
+            log_scales,
+            opacity_logits,
+            features,
+            None,
+            None,
+            None,
+            None,
+            "pinhole",
+            Some(geometry),
+            Some(angles),
+        )?;
+        py.detach(|| {
+            let mut times = Vec::with_capacity(repeats);
+            for _ in 0..repeats {
+                let t0 = std::time::Instant::now();
+                for cam in &cams {
+                    let r = unispine::render::forward(&g, cam, &s)?;
+                    std::hint::black_box(&r);
+                }
+                times.push(t0.elapsed().as_secs_f64());
+            }
+            Ok(times)
+        })
+        .map_err(args::lib_err)
+    })
+}
+
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterize, m)?)?;
@@ -489,5 +538,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(ssim, m)?)?;
     m.add_function(wrap_pyfunction!(loss, m)?)?;
     m.add_function(wrap_pyfunction!(golden_files, m)?)?;
+    m.add_function(wrap_pyfunction!(_bench_render_forward, m)?)?;
     Ok(())
 }
