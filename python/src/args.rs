@@ -53,13 +53,16 @@ pub fn dtype_of(name: &str, obj: &Bound<'_, PyAny>) -> PyResult<Dtype> {
     }
 }
 
-/// The elements of array `name` (dtype `R`, expected shape `shape`, `None` = any extent) in
-/// row-major order, read through its strides (non-contiguous arrays are fine), checked finite.
-pub fn read<R: Float>(
+/// Check array `name` (dtype `R`, expected shape `shape`, `None` = any extent) and hand its
+/// elements in row-major order to `f` as one slice: numpy's own buffer when the array is
+/// C-contiguous (no copy), else a gathered copy (non-contiguous arrays are fine). Every element
+/// must be finite.
+pub fn with_slice<R: Float, T>(
     name: &str,
     obj: &Bound<'_, PyAny>,
     shape: &[Option<usize>],
-) -> PyResult<(Vec<R>, Vec<usize>)> {
+    f: impl FnOnce(&[R], Vec<usize>) -> T,
+) -> PyResult<T> {
     let a = untyped(name, obj)?;
     let py = obj.py();
     if !a.dtype().is_equiv_to(&numpy::dtype::<R>(py)) {
@@ -91,30 +94,46 @@ pub fn read<R: Float>(
         .try_readonly()
         .map_err(|e| PyValueError::new_err(format!("`{name}` cannot be read: {e}")))?;
     let view = ro.as_array();
-    let data: Vec<R> = match view.as_slice() {
-        Some(s) => s.to_vec(),
-        None => view.iter().copied().collect(),
+    let gathered: Vec<R>;
+    let data: &[R] = match view.as_slice() {
+        Some(s) => s,
+        None => {
+            gathered = view.iter().copied().collect();
+            &gathered
+        }
     };
-    if let Some(i) = data.iter().position(|x| !x.is_finite()) {
+    // A branch-free pass over the data; the position is looked up only on failure.
+    if !data.iter().fold(true, |ok, x| ok & x.is_finite()) {
+        let i = data.iter().position(|x| !x.is_finite()).unwrap_or(0);
         return Err(PyValueError::new_err(format!(
             "`{name}` holds a non-finite value ({}) at flat index {i}",
             data[i]
         )));
     }
-    Ok((data, got))
+    Ok(f(data, got))
 }
 
-/// Array `name` with rows of `K` values: shape [n, K] (`n` = None: any).
+/// The elements of array `name` in row-major order (see [`with_slice`]) and its shape.
+pub fn read<R: Float>(
+    name: &str,
+    obj: &Bound<'_, PyAny>,
+    shape: &[Option<usize>],
+) -> PyResult<(Vec<R>, Vec<usize>)> {
+    with_slice(name, obj, shape, |d, s| (d.to_vec(), s))
+}
+
+/// Array `name` with rows of `K` values: shape [n, K] (`n` = None: any), copied once into the
+/// library's layout.
 pub fn rows<R: Float, const K: usize>(
     name: &str,
     obj: &Bound<'_, PyAny>,
     n: Option<usize>,
 ) -> PyResult<Vec<[R; K]>> {
-    let (data, _) = read::<R>(name, obj, &[n, Some(K)])?;
-    Ok(data
-        .chunks_exact(K)
-        .map(|c| std::array::from_fn(|k| c[k]))
-        .collect())
+    with_slice(name, obj, &[n, Some(K)], |d, _| {
+        d.chunks_exact(K)
+            .map(|c| <[R; K]>::try_from(c).expect("chunks of K"))
+            .collect()
+    })
 }
 
 /// Array `name` read as f64 whatever its float dtype (cameras, which the library keeps in f64).

@@ -92,3 +92,17 @@ def test_drr_of_a_uniform_cube_is_its_chord_length(method):
     assert np.all(img[:, :, :10] == 0) and np.all(img[:, :, -10:] == 0)
     f = unispine.drr(np.asfortranarray(vol.astype(np.float32)), geo, 0.0, method=method)
     assert f.dtype == np.float32 and np.allclose(f[0], img[0], rtol=1e-5)
+
+
+def test_golden_cases_select_folders_and_hold_the_vjp_cases():
+    folders = unispine.golden_folders()
+    for f in ["eq01-covariance-vjp", "eq02-rirf-vjp", "eq03-projection-vjp"]:
+        assert f in folders
+    assert {c["folder"] for c in unispine.golden_cases("eq03")} == {
+        "eq03-projection", "eq03-projection-vjp"}
+    vjp = unispine.golden_cases("eq03-projection-vjp")
+    assert len(vjp) == 3 and all(c["folder"] == "eq03-projection-vjp" for c in vjp)
+    case = vjp[0]
+    assert case["inputs"]["d_mean2d"].shape == (len(case["inputs"]["means"]), 2)
+    assert case["outputs"]["d_quats"].dtype == np.float64
+    assert case["tolerance"]["abs"] > 0 and "complex step" in case["checked_by"]

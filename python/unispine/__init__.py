@@ -54,8 +54,9 @@ def golden_folders():
 def golden_cases(folder=None):
     """The golden cases compiled into the package (the repository's ``golden/`` folder).
 
-    ``folder``: a folder name such as ``"eq03-projection"`` or ``"eq03-projection-vjp"``, a
-    prefix such as ``"eq03"``, or ``None`` for every case.
+    ``folder``: a folder name such as ``"eq03-projection"`` or ``"eq03-projection-vjp"`` (the
+    backward cases of a stage), an equation such as ``"eq03"`` (every folder of that equation),
+    or ``None`` for every case.
 
     Returns a list of dicts, one per case, sorted by folder then case name, with keys
     ``folder``, ``name``, ``equation``, ``description``, ``inputs``, ``outputs``,
@@ -66,8 +67,8 @@ def golden_cases(folder=None):
     """
     out = []
     for fold, name, text in _native.golden_files():
-        if folder is not None and not (fold == folder or fold.startswith(folder + "-") or (
-                folder.startswith("eq") and len(folder) == 4 and fold.startswith(folder))):
+        if folder is not None and fold != folder and not (
+                len(folder) == 4 and folder.startswith("eq") and fold.startswith(folder + "-")):
             continue
         case = _decode(_json.loads(text))
         case["folder"] = fold
