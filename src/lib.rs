@@ -60,6 +60,9 @@ pub mod eval;
 /// Tables of finished runs.
 pub mod report;
 
+/// Numerical audits: gradient checks against finite differences, benchmark scenes.
+pub mod audit;
+
 // Front end.
 pub mod cli;
 
