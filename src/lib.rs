@@ -61,6 +61,12 @@ pub mod eval;
 /// Tables of finished runs.
 pub mod report;
 
+/// `unispine reproduce`: plans of datasets x methods x seeds, tables with verdicts, charts.
+pub mod reproduce;
+
+/// Numerical audits: gradient checks against finite differences, benchmark scenes.
+pub mod audit;
+
 // Front end.
 pub mod cli;
 

@@ -32,6 +32,17 @@ pub enum ColorMode {
     Sh,
 }
 
+impl ColorMode {
+    /// The name used in files and on the command line (`rirf-paper`, `rirf-xgaussian`, `sh`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ColorMode::RirfPaper => "rirf-paper",
+            ColorMode::RirfXgaussian => "rirf-xgaussian",
+            ColorMode::Sh => "sh",
+        }
+    }
+}
+
 /// Rasterizer settings that are not part of the scene.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RenderSettings {
