@@ -22,6 +22,7 @@ pub mod image2d;
 pub mod math;
 pub mod par;
 pub mod real;
+pub mod simd;
 
 // The pipeline, in data-flow order (one stage per module).
 
@@ -61,6 +62,9 @@ pub mod eval;
 
 /// Tables of finished runs.
 pub mod report;
+
+/// `unispine reproduce`: plans of datasets x methods x seeds, tables with verdicts, charts.
+pub mod reproduce;
 
 /// Numerical audits: gradient checks against finite differences, benchmark scenes.
 pub mod audit;
