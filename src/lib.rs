@@ -11,14 +11,18 @@
 //!   -> gaussians (Eq. 1 model, Eq. 2 RIRF, ACUI init, PLY)
 //!   -> render (Eqs. 3-5: projection, tiles, compositing; forward + backward)
 //!   -> loss (Eqs. 6-9: SPWM, weighted Charbonnier, SSIM)
-//!   -> optim (Adam, schedules) -> densify -> train -> eval -> report
+//!   -> optim (Adam, schedules) -> densify -> eval (PSNR, SSIM, fps) -> train -> report
 //! ```
+
+// The library never prints (progress leaves as events, `train::event`); only `cli` does.
+#![cfg_attr(not(test), warn(clippy::print_stdout, clippy::print_stderr))]
 
 // Foundations shared by every stage.
 pub mod error;
 pub mod image2d;
 pub mod math;
 pub mod par;
+pub mod preview;
 pub mod real;
 
 // The pipeline, in data-flow order (one stage per module).
@@ -51,11 +55,11 @@ pub mod optim;
 /// Adaptive density control: clone, split, prune, opacity reset.
 pub mod densify;
 
+/// Evaluation: PSNR, SSIM, fps (also run inside the training loop).
+pub mod eval;
+
 /// Method presets and the training loop.
 pub mod train;
-
-/// Evaluation: PSNR, SSIM, fps.
-pub mod eval;
 
 /// Tables of finished runs.
 pub mod report;
@@ -64,6 +68,7 @@ pub mod report;
 pub mod audit;
 
 // Front end.
+#[allow(clippy::print_stdout, clippy::print_stderr)]
 pub mod cli;
 
 pub use error::{Error, Result};

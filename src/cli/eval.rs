@@ -65,7 +65,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     };
     let ds = crate::dataset::store::load(&data)?;
     let (g, settings, ply_path) = load_model(&args.run)?;
-    let targets = eval::test_targets(&ds)?;
+    let targets = crate::dataset::targets::test_targets(&ds)?;
     let r = eval::evaluate(&g, &ds, &targets, &settings)?;
     let (fps, secs) = eval::render_fps(&g, &ds, &settings)?;
     println!(
