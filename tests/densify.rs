@@ -15,10 +15,10 @@ const EXTENT: f64 = 100.0; // clone/split boundary 1.0, world prune 10.0
 fn marked(scales: &[f64]) -> TrainState<f64> {
     let n = scales.len();
     let mut g = Gaussians::<f64>::zeros(n);
-    for i in 0..n {
+    for (i, &scale) in scales.iter().enumerate() {
         let x = i as f64;
         g.means[i] = [x, x + 0.1, x + 0.2];
-        g.log_scales[i] = [scales[i].ln(); 3];
+        g.log_scales[i] = [scale.ln(); 3];
         g.quats[i] = [1.0, 0.0, 0.0, x * 1e-3];
         g.opacity_logits[i] = 0.0;
         g.features[i] = std::array::from_fn(|k| x + k as f64 * 1e-2);
@@ -133,8 +133,7 @@ fn split_replaces_big_gaussians_by_two_smaller_ones() {
     for (j, &i) in ids.iter().enumerate().skip(2) {
         check_aligned(&s, j, i, true);
     }
-    for j in 3..7 {
-        let i = ids[j];
+    for (j, &i) in ids.iter().enumerate().take(7).skip(3) {
         let want = (if i == 1 { 2.0f64 } else { 3.0 } / 1.6).ln();
         assert!(s.params.log_scales[j]
             .iter()

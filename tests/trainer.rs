@@ -250,7 +250,7 @@ fn eval_matches_a_direct_computation() {
     )
     .unwrap();
     let g = ply::read_ply::<f32>(&dir.path().join("model.ply")).unwrap();
-    let targets = unispine::eval::test_targets(&ds).unwrap();
+    let targets = unispine::dataset::targets::test_targets(&ds).unwrap();
     let r = unispine::eval::evaluate(&g, &ds, &targets, &m.render).unwrap();
     // Same model (via PLY) and protocol as the final in-loop evaluation: the same bits.
     assert_eq!(Some(r.psnr), m.test_psnr);

@@ -19,10 +19,10 @@ use ndarray::Array3;
 
 use crate::cli::progress::Progress;
 use crate::cli::render::Precision;
-use crate::dataset::store::write_png;
 use crate::drr::{self, Method};
 use crate::geometry::{self, ConeBeam, VoxelGrid};
 use crate::image2d::Image2d;
+use crate::preview::write_png;
 use crate::real::Real;
 use crate::volume::attenuation::HuConversion;
 use crate::volume::{self, Volume};

@@ -42,7 +42,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         path: ply_path,
         iteration,
     } = rd.read_model()?;
-    let targets = eval::test_targets(&ds)?;
+    let targets = crate::dataset::targets::test_targets(&ds)?;
     let r = eval::evaluate(&g, &ds, &targets, &settings)?;
     let (fps, secs) = eval::render_fps(&g, &ds, &settings)?;
     println!(

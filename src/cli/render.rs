@@ -244,7 +244,7 @@ fn render_and_write<R: Real>(
     let arr = Array2::from_shape_vec((img.height, img.width), img32.clone())?;
     let npy = args.out.join("image.npy");
     ndarray_npy::write_npy(&npy, &arr).with_context(|| format!("writing {}", npy.display()))?;
-    crate::dataset::store::write_png(
+    crate::preview::write_png(
         &args.out.join("image.png"),
         &Image2d::from_vec(img.width, img.height, img32),
     )?;

@@ -34,6 +34,7 @@ use super::{Dataset, Manifest, Split};
 use crate::error::{Error, Result};
 use crate::geometry::ConeBeam;
 use crate::image2d::Image2d;
+use crate::preview::{min_max, write_png};
 use crate::volume::{Provenance, Volume};
 
 /// Value of the `format` field of `dataset.json`.
@@ -228,13 +229,6 @@ pub fn save(ds: &Dataset, dir: &Path) -> Result<()> {
     crate::fsio::write_json_atomic(&path, &json)
 }
 
-fn min_max(x: &[f32]) -> (f32, f32) {
-    x.iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
-            (l.min(v), h.max(v))
-        })
-}
-
 fn write_split(path: &Path, s: &Split, h: usize, w: usize) -> Result<()> {
     let mut flat = Vec::with_capacity(s.projections.len() * h * w);
     for p in &s.projections {
@@ -325,20 +319,6 @@ fn write_previews(ds: &Dataset, dir: &Path) -> Result<Vec<String>> {
         }
     }
     Ok(names)
-}
-
-/// Write an image min-max scaled to 8 bits (a constant image is black).
-pub fn write_png(path: &Path, img: &Image2d<f32>) -> Result<()> {
-    let (lo, hi) = min_max(&img.data);
-    let scale = if hi > lo { 255.0 / (hi - lo) } else { 0.0 };
-    let px: Vec<u8> = img
-        .data
-        .iter()
-        .map(|&v| ((v - lo) * scale).round().clamp(0.0, 255.0) as u8)
-        .collect();
-    let buf = image::GrayImage::from_raw(img.width as u32, img.height as u32, px)
-        .ok_or_else(|| Error::format(path, "png", "image buffer size"))?;
-    crate::fsio::write_png_atomic(path, &buf)
 }
 
 /// Read a dataset folder written by [`save`].

@@ -5,7 +5,8 @@
 //!
 //! Channels: 3DGS stores three colour channels. Our model has one intensity channel with 16
 //! features: writing repeats it in the three channels; reading averages the three (X-Gaussian
-//! keeps its channels identical, research/xgaussian_unispine.md §1). `f_rest` is channel-major
+//! keeps its channels identical and its renderer averages them, X-Gaussian
+//! `gaussian_renderer/__init__.py`). `f_rest` is channel-major
 //! as in 3DGS (`f_rest_{c * K + (k - 1)}` for channel c and coefficient k >= 1, K = number of
 //! rest coefficients per channel). Files with fewer `f_rest` fields (lower SH degree) load with
 //! the missing features at zero.

@@ -18,30 +18,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::real::Real;
 
-/// How a Gaussian's intensity is computed from its 16 features.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum ColorMode {
-    /// The paper's Eq. (2): i = Sigmoid(sum_k lambda_k f_k).
-    #[default]
-    RirfPaper,
-    /// X-Gaussian's code: i = max(0, 0.5 + sum_k lambda_k f_k).
-    RirfXgaussian,
-    /// View-dependent SH colour (3DGS baseline): i = max(0, 0.5 + SH(dir) . f), dir from the
-    /// camera centre to the mean.
-    Sh,
-}
-
-impl ColorMode {
-    /// The name used in files and on the command line (`rirf-paper`, `rirf-xgaussian`, `sh`).
-    pub fn name(self) -> &'static str {
-        match self {
-            ColorMode::RirfPaper => "rirf-paper",
-            ColorMode::RirfXgaussian => "rirf-xgaussian",
-            ColorMode::Sh => "sh",
-        }
-    }
-}
+/// The intensity model lives with Eq. (2) in [`crate::gaussians::rirf`].
+pub use crate::gaussians::rirf::ColorMode;
 
 /// Rasterizer settings that are not part of the scene.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

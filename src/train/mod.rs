@@ -16,7 +16,7 @@
 //!    no group after a densification (upstream re-creates every tensor, so none has a gradient)
 //!    and not for the opacity after a reset.
 //!
-//! Targets are the projections min-max normalised per view ([`crate::eval::normalise_gt`]).
+//! Targets are the projections min-max normalised per view ([`crate::dataset::targets`]).
 //! The scene extent is 1.1 x the largest distance of a training camera centre from their mean
 //! (3DGS `getNerfppNorm`).
 //!
@@ -40,7 +40,7 @@ use std::time::Instant;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::dataset::Dataset;
+use crate::dataset::{targets, Dataset};
 use crate::densify::TrainState;
 use crate::error::{Error, Result};
 use crate::eval::{self, EvalResult};
@@ -137,10 +137,8 @@ impl<'a> Trainer<'a> {
                 "fewer projections than angles",
             ));
         }
-        let targets: Vec<Image2d<f32>> = (0..nv)
-            .map(|k| eval::normalise_gt(&ds.train.projections[k], &format!("train projection {k}")))
-            .collect::<Result<_>>()?;
-        let test_targets = eval::test_targets(ds)?;
+        let targets = targets::train_targets(ds, nv)?;
+        let test_targets = targets::test_targets(ds)?;
         let priors = targets
             .iter()
             .map(|t| cfg.spwm.as_ref().map(|c| spwm::view_prior(t, c)))
