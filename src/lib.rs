@@ -16,10 +16,13 @@
 
 // Foundations shared by every stage.
 pub mod error;
+/// Atomic file writes (temporary name + rename) and output-folder hygiene.
+pub mod fsio;
 pub mod image2d;
 pub mod math;
 pub mod par;
 pub mod real;
+pub mod simd;
 
 // The pipeline, in data-flow order (one stage per module).
 

@@ -157,11 +157,33 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> Error + '_ {
     move |e| Error::io(path, e)
 }
 
+/// The files [`save`] writes into `dir` (besides `previews/`): a command whose input is one of
+/// them must refuse to run (see [`crate::fsio::check_not_output`]).
+pub fn output_files(dir: &Path) -> Vec<std::path::PathBuf> {
+    ["dataset.json", "train.npy", "test.npy", "volume.npy"]
+        .iter()
+        .map(|f| dir.join(f))
+        .collect()
+}
+
 /// Write `ds` into the folder `dir` (created if missing). Refuses an inconsistent dataset
 /// (see [`check`]).
+///
+/// An earlier dataset in `dir` is retired first: `dataset.json` is removed before anything else
+/// is written and written again last, and the arrays and previews of the earlier dataset are
+/// removed, so a save that fails part-way leaves a folder that [`load`] refuses (no
+/// `dataset.json`) rather than new arrays beside an old description. Every file is written
+/// atomically ([`crate::fsio::write_atomic`]).
 pub fn save(ds: &Dataset, dir: &Path) -> Result<()> {
     check(ds)?;
     std::fs::create_dir_all(dir).map_err(io(dir))?;
+    for f in output_files(dir) {
+        crate::fsio::remove_if_exists(&f)?;
+    }
+    let pdir = dir.join("previews");
+    for prefix in ["train_", "test_", "volume_"] {
+        crate::fsio::remove_matching(&pdir, prefix, ".png")?;
+    }
     let (w, h) = ds.geometry.image_size();
     write_split(&dir.join("train.npy"), &ds.train, h, w)?;
     write_split(&dir.join("test.npy"), &ds.test, h, w)?;
@@ -181,13 +203,8 @@ pub fn save(ds: &Dataset, dir: &Path) -> Result<()> {
                 value_max: hi as f64,
             })
         }
-        None => {
-            // A stale volume from an earlier dataset in the same folder would be misleading.
-            if vol_path.exists() {
-                std::fs::remove_file(&vol_path).map_err(io(&vol_path))?;
-            }
-            None
-        }
+        // A stale volume of an earlier dataset was removed above.
+        None => None,
     };
 
     let previews = write_previews(ds, dir)?;
@@ -208,10 +225,7 @@ pub fn save(ds: &Dataset, dir: &Path) -> Result<()> {
         "previews": previews,
     });
     let path = dir.join("dataset.json");
-    let text = serde_json::to_string_pretty(&json)
-        .map_err(|e| Error::format(&path, "dataset.json", e.to_string()))?;
-    std::fs::write(&path, text + "\n").map_err(io(&path))?;
-    Ok(())
+    crate::fsio::write_json_atomic(&path, &json)
 }
 
 fn min_max(x: &[f32]) -> (f32, f32) {
@@ -228,14 +242,23 @@ fn write_split(path: &Path, s: &Split, h: usize, w: usize) -> Result<()> {
     }
     let arr = Array3::from_shape_vec((s.projections.len(), h, w), flat)
         .map_err(|e| Error::format(path, "shape", e.to_string()))?;
-    ndarray_npy::write_npy(path, &arr).map_err(|e| Error::format(path, "npy", e.to_string()))
+    write_npy_atomic(path, &arr)
+}
+
+/// An f32 array as `.npy`, written atomically.
+fn write_npy_atomic(path: &Path, arr: &Array3<f32>) -> Result<()> {
+    use ndarray_npy::WriteNpyExt;
+    let mut buf = Vec::new();
+    arr.write_npy(&mut buf)
+        .map_err(|e| Error::format(path, "npy", e.to_string()))?;
+    crate::fsio::write_atomic(path, &buf)
 }
 
 fn write_volume(path: &Path, v: &Volume<f32>) -> Result<()> {
     // Our layout is x fastest, i.e. Fortran order of an [x, y, z] array.
     let arr = Array3::from_shape_vec((v.dims[0], v.dims[1], v.dims[2]).f(), v.data.clone())
         .map_err(|e| Error::format(path, "shape", e.to_string()))?;
-    ndarray_npy::write_npy(path, &arr).map_err(|e| Error::format(path, "npy", e.to_string()))
+    write_npy_atomic(path, &arr)
 }
 
 /// Indices of `m` views spread evenly over `n` (first and last included).
@@ -315,8 +338,7 @@ pub fn write_png(path: &Path, img: &Image2d<f32>) -> Result<()> {
         .collect();
     let buf = image::GrayImage::from_raw(img.width as u32, img.height as u32, px)
         .ok_or_else(|| Error::format(path, "png", "image buffer size"))?;
-    buf.save(path)
-        .map_err(|e| Error::format(path, "png", e.to_string()))
+    crate::fsio::write_png_atomic(path, &buf)
 }
 
 /// Read a dataset folder written by [`save`].
@@ -430,25 +452,23 @@ pub fn load(dir: &Path) -> Result<Dataset> {
     })
 }
 
-/// Read an npy as f32 (f64 files are accepted and rounded).
+/// Read a 3-D float npy (f64 files are accepted and rounded) as its shape and f32 values in
+/// C order; sizes are checked against the file length before anything is allocated.
 fn read_f32_array3(path: &Path) -> Result<Array3<f32>> {
-    if !path.exists() {
-        return Err(Error::io(
+    let a = crate::volume::npy::read(path)?;
+    if a.shape.len() != 3 || !a.is_float() {
+        return Err(Error::format(
             path,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "file not found"),
+            "npy",
+            format!(
+                "expected a 3-D f32 (or f64) npy array, got {} {:?}",
+                a.descr, a.shape
+            ),
         ));
     }
-    match ndarray_npy::read_npy::<_, Array3<f32>>(path) {
-        Ok(a) => Ok(a),
-        Err(e32) => match ndarray_npy::read_npy::<_, Array3<f64>>(path) {
-            Ok(a) => Ok(a.mapv(|v| v as f32)),
-            Err(_) => Err(Error::format(
-                path,
-                "npy",
-                format!("expected a 3-D f32 (or f64) npy array: {e32}"),
-            )),
-        },
-    }
+    let shape = (a.shape[0], a.shape[1], a.shape[2]);
+    Array3::from_shape_vec(shape, a.to_f32_c())
+        .map_err(|e| Error::format(path, "shape", e.to_string()))
 }
 
 fn read_split(path: &Path, name: &str, n: usize, h: usize, w: usize) -> Result<Vec<Image2d<f32>>> {
