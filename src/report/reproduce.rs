@@ -255,9 +255,9 @@ pub fn stability_map(rows: &[Row], floor_db: Option<f64>) -> String {
     let all: Vec<f64> = rows.iter().filter_map(|r| r.psnr).collect();
     let lo = all.iter().copied().fold(f64::INFINITY, f64::min);
     let hi = all.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let (cw, ch, left, top) = (90.0, 34.0, 230.0, 70.0);
+    let (cw, ch, left, top) = (90.0, 34.0, 230.0, 84.0);
     let nrow = ds.len() * ms.len();
-    let width = left + cw * cols.len() as f64 + 30.0;
+    let width = (left + cw * cols.len() as f64 + 30.0).max(640.0);
     let height = top + ch * nrow as f64 + 80.0;
     let mut s = format!(
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="DejaVu Sans, Arial, sans-serif">
@@ -267,7 +267,7 @@ pub fn stability_map(rows: &[Row], floor_db: Option<f64>) -> String {
 "#,
         width / 2.0,
         left + cw * cols.len() as f64 / 2.0,
-        top - 12.0,
+        top - 36.0,
         svg::escape(&flag)
     );
     for (j, c) in cols.iter().enumerate() {
@@ -275,7 +275,7 @@ pub fn stability_map(rows: &[Row], floor_db: Option<f64>) -> String {
             s,
             r#"<text x="{:.1}" y="{:.1}" font-size="12" text-anchor="middle">{}</text>"#,
             left + cw * (j as f64 + 0.5),
-            top - 30.0 + 34.0 - 16.0,
+            top - 10.0,
             svg::escape(c.as_deref().unwrap_or("-"))
         );
     }
@@ -336,8 +336,10 @@ pub fn stability_map(rows: &[Row], floor_db: Option<f64>) -> String {
     let ly = top + ch * nrow as f64 + 28.0;
     let _ = writeln!(
         s,
-        r##"<text x="{left:.1}" y="{ly:.1}" font-size="12">×k: k seeds diverged or failed; red frame: a seed ended below {}; colour: {lo:.1} dB (light) to {hi:.1} dB (dark)</text>"##,
-        floor_db.map_or("the floor (none set)".to_string(), |f| format!("{f} dB"))
+        r##"<text x="20" y="{ly:.1}" font-size="12">×k: k seeds diverged or failed; red frame: a seed ended below {}.</text>
+<text x="20" y="{:.1}" font-size="12">Colour: mean test PSNR from {lo:.1} dB (light) to {hi:.1} dB (dark); grey: no result.</text>"##,
+        floor_db.map_or("the floor (none set)".to_string(), |f| format!("{f} dB")),
+        ly + 18.0
     );
     s.push_str("</svg>\n");
     s
