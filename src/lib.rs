@@ -24,6 +24,7 @@ pub mod math;
 pub mod par;
 pub mod preview;
 pub mod real;
+pub mod simd;
 
 // The pipeline, in data-flow order (one stage per module).
 
@@ -63,6 +64,9 @@ pub mod train;
 
 /// Tables of finished runs.
 pub mod report;
+
+/// `unispine reproduce`: plans of datasets x methods x seeds, tables with verdicts, charts.
+pub mod reproduce;
 
 /// Numerical audits: gradient checks against finite differences, benchmark scenes.
 pub mod audit;

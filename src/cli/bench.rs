@@ -5,13 +5,19 @@
 //! - `render`: forward and forward + backward of the rasterizer in f32 on the CT-like scenes of
 //!   [`crate::audit::bench`], for each Gaussian count and square detector size; prints median
 //!   times, Gaussian-pixel blends per second, and the same throughput of the naive per-pixel
-//!   reference measured on a smaller case in the same run, scaled per blend.
+//!   reference measured on a smaller case in the same run, scaled per blend; the SIMD path used
+//!   ([`crate::simd::Simd::active`]) and the arithmetic limit of the work: blends x the kernels'
+//!   flops per blend over the peak f32 rate measured in the same run
+//!   ([`crate::simd::peak_run`]), and the fraction of it reached.
 //!
 //! (A `train` kind, one full training iteration, belongs to the trainer.)
 
 use anyhow::bail;
 
-use crate::audit::bench::{time_naive, time_render, BOX_MM};
+use std::time::Instant;
+
+use crate::audit::bench::{process_cpu_seconds, time_naive, time_render, BOX_MM};
+use crate::render::composite;
 
 /// Arguments of `unispine bench`.
 #[derive(Debug, clap::Args)]
@@ -27,6 +33,10 @@ pub struct BenchArgs {
     /// Repetitions per case (the median is reported).
     #[arg(long, default_value_t = 7)]
     pub reps: usize,
+    /// Also measure the baselines of the ratios in this run: the naive reference and the
+    /// machine's peak flop rate (`false` to time the rasterizer alone, e.g. under a profiler).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub baselines: bool,
 }
 
 /// Run `unispine bench`.
@@ -50,16 +60,58 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
         rayon::current_num_threads(),
         args.reps
     );
-    // Naive per-pixel reference, measured in this run on a smaller case and scaled per blend.
-    let (nn, ns) = (10_000usize, 64usize);
-    let (naive_bps, naive_blends) = time_naive(nn, ns)?;
+    let simd = crate::simd::Simd::active();
+    let supported: Vec<&str> = crate::simd::Simd::supported_paths()
+        .iter()
+        .map(|p| p.name())
+        .collect();
     println!(
-        "naive reference (every Gaussian at every pixel, 1 thread): {nn} Gaussians at {ns}x{ns}: \
-         {naive_blends} blends, {:.3e} blends/s",
-        naive_bps
+        "SIMD path: {} (supported: {}; cap with UNISPINE_SIMD)",
+        simd.name(),
+        supported.join(", ")
+    );
+    if let Err(e) = crate::simd::Simd::from_env() {
+        bail!("{e}");
+    }
+    // Naive per-pixel reference and the machine's peak, measured in this run.
+    let (mut naive_bps, mut peak) = (f64::NAN, f64::NAN);
+    if args.baselines {
+        let (nn, ns) = (10_000usize, 64usize);
+        let (bps, naive_blends) = time_naive(nn, ns)?;
+        naive_bps = bps;
+        println!(
+            "naive reference (every Gaussian at every pixel, 1 thread): {nn} Gaussians at \
+             {ns}x{ns}: {naive_blends} blends, {bps:.3e} blends/s"
+        );
+        let threads = rayon::current_num_threads();
+        let cpu0 = process_cpu_seconds();
+        let t0 = Instant::now();
+        let flops = crate::simd::peak_run(simd, threads, 100_000_000) as f64;
+        let wall = t0.elapsed().as_secs_f64();
+        let cpu = match (cpu0, process_cpu_seconds()) {
+            (Some(a), Some(b)) if b > a => b - a,
+            _ => wall * threads as f64,
+        };
+        peak = flops / cpu;
+        println!(
+            "measured peak: {:.1} Gflop/s per busy core ({:.1} Gflop/s wall on {} threads), \
+             f32 multiplies + adds, {}",
+            peak * 1e-9,
+            flops / wall * 1e-9,
+            threads,
+            simd.name()
+        );
+    }
+    let fpb = composite::FLOPS_PER_BLEND_FORWARD + composite::FLOPS_PER_BLEND_BACKWARD;
+    println!(
+        "arithmetic limit = blends x {fpb} flops (forward {} + backward {}, counted from the \
+         kernels) / peak per core / threads (the wall time of an idle machine); 'of limit' = \
+         blends x {fpb} flops / peak per core over the forward + backward CPU time",
+        composite::FLOPS_PER_BLEND_FORWARD,
+        composite::FLOPS_PER_BLEND_BACKWARD
     );
     println!(
-        "{:>9} {:>6} {:>11} {:>11} {:>11} {:>12} {:>10} {:>13} {:>13} {:>10}",
+        "{:>9} {:>6} {:>11} {:>11} {:>11} {:>12} {:>10} {:>13} {:>13} {:>10} {:>9} {:>8}",
         "gaussians",
         "size",
         "forward ms",
@@ -69,14 +121,19 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
         "blends/px",
         "fwd blends/s",
         "f+b blends/s",
-        "x naive"
+        "x naive",
+        "limit ms",
+        "of limit"
     );
     for &size in &args.sizes {
         for &n in &args.gaussians {
             let t = time_render(n, size, args.reps)?;
             let fbps = t.blends as f64 / t.forward;
-            println!(
-                "{:>9} {:>6} {:>11.2} {:>11.2} {:>11} {:>12} {:>10.1} {:>13.3e} {:>13.3e} {:>10.1}",
+            let limit_cpu = t.blends as f64 * fpb as f64 / peak;
+            let limit = limit_cpu / rayon::current_num_threads() as f64;
+            let frac = limit_cpu / t.cpu_forward_backward.unwrap_or(f64::NAN);
+            let line = format!(
+                "{:>9} {:>6} {:>11.2} {:>11.2} {:>11} {:>12} {:>10.1} {:>13.3e} {:>13.3e} {:>10.1} {:>9.2} {:>7.1}%",
                 n,
                 size,
                 t.forward * 1e3,
@@ -87,8 +144,12 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
                 t.blends as f64 / (size * size) as f64,
                 fbps,
                 t.blends as f64 / t.forward_backward,
-                fbps / naive_bps
-            );
+                fbps / naive_bps,
+                limit * 1e3,
+                100.0 * frac
+            )
+            .replace("NaN", "-");
+            println!("{line}");
         }
     }
     println!(

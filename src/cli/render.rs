@@ -150,18 +150,16 @@ fn camera(args: &RenderArgs) -> anyhow::Result<Camera> {
 
 /// The upstream gradient W, checked against the image shape.
 fn read_weights(path: &Path, cam: &Camera) -> anyhow::Result<Image2d<f64>> {
-    let arr: Array2<f64> = match ndarray_npy::read_npy::<_, Array2<f64>>(path) {
-        Ok(a) => a,
-        Err(_) => ndarray_npy::read_npy::<_, Array2<f32>>(path)
-            .map(|a| a.mapv(f64::from))
-            .with_context(|| {
-                format!(
-                    "--grad-weights {}: expected a 2-D f32 or f64 npy array [v, u]",
-                    path.display()
-                )
-            })?,
-    };
-    let (h, w) = arr.dim();
+    let arr = crate::volume::npy::read(path).context("--grad-weights")?;
+    if arr.shape.len() != 2 || !arr.is_float() {
+        bail!(
+            "--grad-weights {}: expected a 2-D f32 or f64 npy array [v, u], got {} {:?}",
+            path.display(),
+            arr.descr,
+            arr.shape
+        );
+    }
+    let (h, w) = (arr.shape[0], arr.shape[1]);
     if (h, w) != (cam.height, cam.width) {
         bail!(
             "--grad-weights {}: shape [{h}, {w}] does not match the detector [v, u] = [{}, {}]",
@@ -170,7 +168,7 @@ fn read_weights(path: &Path, cam: &Camera) -> anyhow::Result<Image2d<f64>> {
             cam.width
         );
     }
-    let data: Vec<f64> = arr.iter().copied().collect();
+    let data: Vec<f64> = arr.to_f64_c();
     crate::error::check_finite(&format!("--grad-weights {}", path.display()), &data)?;
     Ok(Image2d::from_vec(w, h, data))
 }

@@ -10,6 +10,7 @@
 //! used by densification.
 
 pub mod composite;
+pub mod lanes;
 pub mod project;
 pub mod tiles;
 

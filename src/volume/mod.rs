@@ -243,9 +243,51 @@ fn format_of(path: &std::path::Path) -> crate::error::Result<Format> {
     }
 }
 
-/// Read a whole file, naming it in the error.
+/// Open `path` for reading, refusing anything but a regular file once symlinks are followed
+/// (a device such as `/dev/zero` or `/dev/urandom`, a FIFO or a directory has no length to check
+/// sizes against). Returns the file and its length in bytes.
+pub(crate) fn open_regular(path: &std::path::Path) -> crate::error::Result<(std::fs::File, u64)> {
+    let file = std::fs::File::open(path).map_err(|e| crate::error::Error::io(path, e))?;
+    let meta = file
+        .metadata()
+        .map_err(|e| crate::error::Error::io(path, e))?;
+    if !meta.is_file() {
+        return Err(crate::error::Error::format(
+            path,
+            "file",
+            format!(
+                "not a regular file ({}): only regular files are read",
+                if meta.is_dir() {
+                    "a directory"
+                } else {
+                    "a device, FIFO or socket"
+                }
+            ),
+        ));
+    }
+    Ok((file, meta.len()))
+}
+
+/// Read a whole regular file (see [`open_regular`]), naming it in the error.
 pub(crate) fn read_bytes(path: &std::path::Path) -> crate::error::Result<Vec<u8>> {
-    std::fs::read(path).map_err(|e| crate::error::Error::io(path, e))
+    use std::io::Read;
+    let (file, len) = open_regular(path)?;
+    let cap = usize::try_from(len).map_err(|_| {
+        crate::error::Error::format(
+            path,
+            "file",
+            format!("{len} bytes exceed the address space"),
+        )
+    })?;
+    let mut out = Vec::new();
+    out.try_reserve_exact(cap).map_err(|_| {
+        crate::error::Error::format(path, "file", format!("cannot hold {len} bytes in memory"))
+    })?;
+    // `take`: a file that grows while it is read cannot make us read past its length.
+    file.take(len)
+        .read_to_end(&mut out)
+        .map_err(|e| crate::error::Error::io(path, e))?;
+    Ok(out)
 }
 
 /// Scalar element types shared by the readers.
