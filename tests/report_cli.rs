@@ -23,6 +23,8 @@ fn metrics(method: &str, psnr: f64, n: usize) -> Metrics {
         extent: 1285.36,
         render: RenderSettings::default(),
         threads: 2,
+        model_params: None,
+        model_bytes: None,
     }
 }
 

@@ -11,6 +11,7 @@ use std::sync::Arc;
 use anyhow::Context;
 
 use super::progress::Progress;
+use crate::baseline::Baseline;
 use crate::train::{self, Event, Method, TrainOverrides};
 
 /// Arguments of `unispine train`.
@@ -19,9 +20,9 @@ pub struct TrainArgs {
     /// Dataset folder written by `unispine data`.
     #[arg(long)]
     pub data: PathBuf,
-    /// Method preset.
-    #[arg(long, value_enum, default_value = "unispine")]
-    pub method: Method,
+    /// Method: a Gaussian preset (unispine, xgaussian, 3dgs, spwm-only) or a baseline (fdk).
+    #[arg(long, default_value = "unispine", value_parser = parse_method)]
+    pub method: MethodArg,
     /// Training iterations (paper: 20000).
     #[arg(long)]
     pub iters: Option<usize>,
@@ -46,10 +47,47 @@ pub fn init_threads(threads: Option<usize>) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `--method`: a Gaussian preset or a baseline of [`crate::baseline`].
+#[derive(Clone, Copy, Debug)]
+pub enum MethodArg {
+    Gaussians(Method),
+    Baseline(Baseline),
+}
+
+impl MethodArg {
+    /// The Gaussian preset, when `--method` names one.
+    pub fn gaussians(self) -> Option<Method> {
+        match self {
+            MethodArg::Gaussians(m) => Some(m),
+            MethodArg::Baseline(_) => None,
+        }
+    }
+}
+
+fn parse_method(s: &str) -> Result<MethodArg, String> {
+    if let Some(b) = Baseline::parse(s) {
+        return Ok(MethodArg::Baseline(b));
+    }
+    <Method as clap::ValueEnum>::from_str(s, false)
+        .map(MethodArg::Gaussians)
+        .map_err(|_| {
+            let mut names: Vec<&str> = <Method as clap::ValueEnum>::value_variants()
+                .iter()
+                .map(|m| m.name())
+                .collect();
+            names.extend(Baseline::names());
+            format!("unknown method `{s}` (one of: {})", names.join(", "))
+        })
+}
+
 /// Run `unispine train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     init_threads(args.threads)?;
-    let mut cfg = args.overrides.apply(args.method, args.iters)?;
+    let method = match args.method {
+        MethodArg::Gaussians(m) => m,
+        MethodArg::Baseline(b) => return run_baseline(b, &args),
+    };
+    let mut cfg = args.overrides.apply(method, args.iters)?;
     cfg.data = Some(args.data.display().to_string());
     let ds = crate::dataset::store::load(&args.data)?;
     let stop = Arc::new(AtomicBool::new(false));
@@ -137,6 +175,56 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         m.test_psnr.unwrap_or(f64::NAN),
         m.test_ssim.unwrap_or(f64::NAN),
         m.n_gaussians,
+        m.train_time_s,
+        m.render_fps.unwrap_or(f64::NAN)
+    );
+    println!("outputs: {}", args.out.display());
+    Ok(())
+}
+
+/// `unispine train --method BASELINE`: the baseline's own trainer, the same run folder.
+fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
+    let ds = crate::dataset::store::load(&args.data)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        ctrlc::set_handler(move || {
+            if stop.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+            eprintln!("\nCtrl-C: stopping after this iteration ...");
+        })
+        .context("installing the Ctrl-C handler")?;
+    }
+    eprintln!(
+        "running `{}` on {} -> {}",
+        b.name(),
+        args.data.display(),
+        args.out.display()
+    );
+    let mut bar: Option<Progress> = None;
+    let mut on_event = |e: &Event| {
+        if let Event::Progress {
+            total,
+            loss,
+            its_per_sec,
+            ..
+        } = e
+        {
+            let b = bar.get_or_insert_with(|| Progress::new("train", *total as u64));
+            b.inc(1, &format!("loss {loss:.3e} {its_per_sec:.1} it/s"));
+        }
+    };
+    let m = crate::baseline::run(b, &ds, Some(&args.out), args.iters, &stop, &mut on_event);
+    if let Some(b) = bar.take() {
+        b.finish("");
+    }
+    let m = m?;
+    println!(
+        "{}: test PSNR {:.3} dB, SSIM {:.4}, train time {:.2} s, render {:.2} fps",
+        m.method,
+        m.test_psnr.unwrap_or(f64::NAN),
+        m.test_ssim.unwrap_or(f64::NAN),
         m.train_time_s,
         m.render_fps.unwrap_or(f64::NAN)
     );

@@ -118,6 +118,12 @@ pub struct Metrics {
     pub render: RenderSettings,
     /// rayon threads of the run.
     pub threads: usize,
+    /// Number of model parameters (baselines: voxels, field weights), when known.
+    #[serde(default)]
+    pub model_params: Option<u64>,
+    /// Size of the saved model in bytes, when known.
+    #[serde(default)]
+    pub model_bytes: Option<u64>,
 }
 
 /// The training loop's state; [`Trainer::step`] runs one iteration.
@@ -494,6 +500,8 @@ pub fn run(
         extent: tr.extent,
         render: final_settings,
         threads: rayon::current_num_threads(),
+        model_params: None,
+        model_bytes: None,
     };
     if let Some(dir) = out {
         let s = serde_json::to_string_pretty(&metrics).expect("metrics serialise");
