@@ -20,6 +20,7 @@ pub mod image2d;
 pub mod math;
 pub mod par;
 pub mod real;
+pub mod simd;
 
 // The pipeline, in data-flow order (one stage per module).
 
@@ -69,6 +70,12 @@ pub mod baseline;
 
 /// Tables of finished runs.
 pub mod report;
+
+/// `unispine reproduce`: plans of datasets x methods x seeds, tables with verdicts, charts.
+pub mod reproduce;
+
+/// Numerical audits: gradient checks against finite differences, benchmark scenes.
+pub mod audit;
 
 // Front end.
 pub mod cli;

@@ -4,22 +4,15 @@ use std::path::Path;
 
 use ndarray::{Array3, ShapeBuilder};
 use unispine::dataset::{store, Dataset, Manifest, Split};
-use unispine::geometry::{ConeBeam, Mode};
+use unispine::geometry::ConeBeam;
 use unispine::image2d::Image2d;
 use unispine::volume::{Provenance, Volume};
 
 fn geometry() -> ConeBeam {
     ConeBeam {
-        dsd: 1500.0,
-        dso: 1000.0,
-        n_detector: [6, 7],
-        d_detector: [1.25, 1.5],
-        n_voxel: [4, 5, 3],
-        d_voxel: [1.0, 0.75, 2.0],
         off_origin: [0.5, -1.0, 2.0],
         off_detector: [0.25, -0.5],
-        mode: Mode::Cone,
-        accuracy: 0.5,
+        ..ConeBeam::centred([6, 7], [1.25, 1.5], [4, 5, 3], [1.0, 0.75, 2.0])
     }
 }
 

@@ -2,11 +2,11 @@
 //! library), and the errors for bad input.
 
 use std::path::Path;
-use std::process::Command;
 
+use common::cli::{run, Run};
 use ndarray::{Array3, Ix3};
 
-const BIN: &str = env!("CARGO_BIN_EXE_unispine");
+mod common;
 
 /// A 16 x 12 x 10 volume (1 mm voxels, `[x, y, z]`) of value `val` everywhere.
 fn write_volume(path: &Path, val: f32, nan_at: Option<[usize; 3]>) {
@@ -19,19 +19,7 @@ fn write_volume(path: &Path, val: f32, nan_at: Option<[usize; 3]>) {
 
 /// Cone-beam geometry without nVoxel / dVoxel / offOrigin (taken from the volume).
 fn write_geometry(path: &Path, extra: &str) {
-    let text = format!(
-        r#"{{"DSD": 300.0, "DSO": 200.0, "nDetector": [9, 11], "dDetector": [3.0, 3.0]{extra}}}"#
-    );
-    std::fs::write(path, text).unwrap();
-}
-
-fn run(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(BIN).args(args).output().unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    common::cli::write_geometry(path, [300.0, 200.0], [9, 11], 3.0, extra);
 }
 
 #[test]
@@ -43,7 +31,9 @@ fn drr_writes_projections_pngs_and_metadata() {
     write_geometry(&geo, "");
     for method in ["siddon", "trilinear"] {
         let out = dir.path().join(method);
-        let (ok, _, err) = run(&[
+        let Run {
+            ok, stderr: err, ..
+        } = run(&[
             "drr",
             "--volume",
             vol.to_str().unwrap(),
@@ -107,7 +97,9 @@ fn drr_f64_and_hu_conversion() {
     write_volume(&vol, 0.0, None);
     write_geometry(&geo, r#", "nVoxel": [16, 12, 10], "dVoxel": [1, 1, 1]"#);
     let out = dir.path().join("o");
-    let (ok, _, err) = run(&[
+    let Run {
+        ok, stderr: err, ..
+    } = run(&[
         "drr",
         "--volume",
         vol.to_str().unwrap(),
@@ -151,7 +143,9 @@ fn expect_error(args_extra: &[&str], vol_nan: bool, geo_extra: &str, needle: &[&
     if !args_extra.contains(&"--angles-deg") {
         args.extend_from_slice(&["--angles-deg", "0"]);
     }
-    let (ok, _, err) = run(&args);
+    let Run {
+        ok, stderr: err, ..
+    } = run(&args);
     assert!(!ok, "expected a failure for {args_extra:?} {geo_extra}");
     assert!(!err.contains("panicked"), "{err}");
     for n in needle {
@@ -166,7 +160,9 @@ fn drr_bad_inputs_give_clear_errors() {
     let geo = dir.path().join("geo.json");
     write_geometry(&geo, "");
     let missing = dir.path().join("nope.nii.gz");
-    let (ok, _, err) = run(&[
+    let Run {
+        ok, stderr: err, ..
+    } = run(&[
         "drr",
         "--volume",
         missing.to_str().unwrap(),
@@ -202,7 +198,9 @@ fn drr_missing_geometry_file_is_named() {
     let dir = tempfile::tempdir().unwrap();
     let vol = dir.path().join("vol.npy");
     write_volume(&vol, 1.0, None);
-    let (ok, _, err) = run(&[
+    let Run {
+        ok, stderr: err, ..
+    } = run(&[
         "drr",
         "--volume",
         vol.to_str().unwrap(),
@@ -218,7 +216,9 @@ fn drr_missing_geometry_file_is_named() {
 
 #[test]
 fn drr_help_explains_each_flag() {
-    let (ok, out, _) = run(&["drr", "--help"]);
+    let Run {
+        ok, stdout: out, ..
+    } = run(&["drr", "--help"]);
     assert!(ok);
     for flag in [
         "--volume",

@@ -1,10 +1,13 @@
 //! `unispine report`: the table rows come from each run's metrics.json; a folder without one is
 //! an error naming the file.
 
-use std::process::Command;
+use std::ffi::OsStr;
 
+use common::cli;
 use unispine::render::RenderSettings;
 use unispine::train::{EvalPoint, Metrics};
+
+mod common;
 
 fn metrics(method: &str, psnr: f64, n: usize) -> Metrics {
     Metrics {
@@ -41,20 +44,13 @@ fn report_prints_one_row_per_run_and_names_missing_files() {
         std::fs::write(d.join("metrics.json"), serde_json::to_string(m).unwrap()).unwrap();
     }
     let out_file = dir.path().join("table.md");
-    let out = Command::new(env!("CARGO_BIN_EXE_unispine"))
-        .arg("report")
-        .arg(dir.path().join("a"))
-        .arg(dir.path().join("b"))
-        .arg("--out")
-        .arg(&out_file)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let table = String::from_utf8(out.stdout).unwrap();
+    let table = cli::ok(&[
+        OsStr::new("report"),
+        dir.path().join("a").as_os_str(),
+        dir.path().join("b").as_os_str(),
+        OsStr::new("--out"),
+        out_file.as_os_str(),
+    ]);
     assert_eq!(table, std::fs::read_to_string(&out_file).unwrap());
     let rows: Vec<&str> = table.lines().skip(2).collect();
     assert_eq!(rows.len(), 2);
@@ -67,13 +63,7 @@ fn report_prints_one_row_per_run_and_names_missing_files() {
 
     let missing = dir.path().join("nothing-here");
     std::fs::create_dir_all(&missing).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_unispine"))
-        .arg("report")
-        .arg(&missing)
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = cli::fails(&[OsStr::new("report"), missing.as_os_str()]);
     assert!(err.contains("metrics.json"), "{err}");
 }
 
@@ -112,20 +102,14 @@ fn report_charts_place_runs_by_value_and_name_bad_logs() {
         std::fs::write(d.join("log.csv"), log).unwrap();
     }
     let charts = dir.path().join("charts");
-    let run = |args: &[&std::path::Path]| {
-        let mut c = Command::new(env!("CARGO_BIN_EXE_unispine"));
-        c.arg("report");
-        for a in args {
-            c.arg(a);
-        }
-        c.arg("--charts").arg(&charts).output().unwrap()
+    let run = |runs: &[&std::path::Path]| {
+        let mut args: Vec<&OsStr> = vec![OsStr::new("report")];
+        args.extend(runs.iter().map(|p| p.as_os_str()));
+        args.extend([OsStr::new("--charts"), charts.as_os_str()]);
+        cli::run(&args)
     };
     let out = run(&[&dir.path().join("a"), &dir.path().join("b")]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert!(out.ok, "{}", out.stderr);
 
     let tradeoff = std::fs::read_to_string(charts.join("tradeoff.svg")).unwrap();
     assert!(tradeoff.starts_with("<svg"));
@@ -148,7 +132,7 @@ fn report_charts_place_runs_by_value_and_name_bad_logs() {
     )
     .unwrap();
     let out = run(&[&dir.path().join("b")]);
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.ok);
+    let err = out.stderr;
     assert!(err.contains("log.csv") && err.contains("line 2"), "{err}");
 }

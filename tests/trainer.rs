@@ -9,25 +9,14 @@ use clap::Parser;
 use unispine::dataset::{Dataset, Manifest, Split};
 use unispine::error::Error;
 use unispine::gaussians::{ply, Gaussians};
-use unispine::geometry::{ConeBeam, Mode};
+use unispine::geometry::ConeBeam;
 use unispine::image2d::Image2d;
 use unispine::render::{self, ColorMode, RenderSettings};
 use unispine::train::{self, Event, Method, TrainConfig, Trainer};
 
 fn geometry() -> ConeBeam {
     // 64 mm box, magnification 1.5 -> 96 mm on a 32 px detector at 3 mm.
-    ConeBeam {
-        dsd: 1500.0,
-        dso: 1000.0,
-        n_detector: [32, 32],
-        d_detector: [3.0, 3.0],
-        n_voxel: [32, 32, 32],
-        d_voxel: [2.0, 2.0, 2.0],
-        off_origin: [0.0; 3],
-        off_detector: [0.0; 2],
-        mode: Mode::Cone,
-        accuracy: 0.5,
-    }
+    ConeBeam::centred([32, 32], [3.0, 3.0], [32, 32, 32], [2.0, 2.0, 2.0])
 }
 
 fn hidden() -> Gaussians<f64> {

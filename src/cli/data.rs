@@ -90,10 +90,10 @@ pub struct DatasetFlags {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Source-detector distance in mm (NAF / SAX-NeRF / UniSpine-GS: 1500).
-    #[arg(long, default_value_t = 1500.0)]
+    #[arg(long, default_value_t = crate::geometry::DSD_MM)]
     pub dsd: f64,
     /// Source-origin distance in mm (NAF / SAX-NeRF / UniSpine-GS: 1000).
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = crate::geometry::DSO_MM)]
     pub dso: f64,
     /// Beam shape.
     #[arg(long, value_enum, default_value = "cone")]
@@ -172,7 +172,7 @@ pub struct ImportArgs {
     pub out: PathBuf,
     /// Factor applied to the stored projections: NAF-family generators compute them in metres,
     /// 1000 converts to our mm. Use 1 for pickles already in mm.
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = crate::geometry::DSO_MM)]
     pub projection_scale: f64,
 }
 

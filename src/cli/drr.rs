@@ -11,7 +11,7 @@
 //! `offOrigin` may be omitted: they are then taken from the volume (its dims, voxel size and
 //! offset). When given they must describe the volume's grid (checked, the error names the field).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Mutex;
 
 use anyhow::{bail, Context};
@@ -21,7 +21,7 @@ use crate::cli::progress::Progress;
 use crate::cli::render::Precision;
 use crate::dataset::store::write_png;
 use crate::drr::{self, Method};
-use crate::geometry::ConeBeam;
+use crate::geometry::{self, ConeBeam, VoxelGrid};
 use crate::image2d::Image2d;
 use crate::real::Real;
 use crate::volume::attenuation::HuConversion;
@@ -76,7 +76,12 @@ pub fn run(args: DrrArgs) -> anyhow::Result<()> {
     };
     let vol = volume::load(&args.volume)
         .with_context(|| format!("reading --volume {}", args.volume.display()))?;
-    let geo = read_geometry(&args.geometry, &vol)?;
+    let grid = VoxelGrid {
+        n_voxel: vol.dims,
+        d_voxel: vol.spacing,
+        off_origin: vol.offset,
+    };
+    let geo = geometry::read_json(&args.geometry, Some(&grid)).context("--geometry")?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
     match args.precision {
@@ -102,37 +107,6 @@ fn parse_angles(s: &str) -> anyhow::Result<Vec<f64>> {
         out.push(v);
     }
     Ok(out)
-}
-
-/// The geometry JSON with `nVoxel` / `dVoxel` / `offOrigin` filled in from the volume when
-/// omitted.
-fn read_geometry<R: Real>(path: &Path, vol: &Volume<R>) -> anyhow::Result<ConeBeam> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read --geometry {}", path.display()))?;
-    let mut value: serde_json::Value = serde_json::from_str(&text)
-        .with_context(|| format!("--geometry {}: not valid JSON", path.display()))?;
-    let obj = value.as_object_mut().with_context(|| {
-        format!(
-            "--geometry {}: expected a JSON object with the TIGRE fields",
-            path.display()
-        )
-    })?;
-    obj.entry("nVoxel")
-        .or_insert_with(|| serde_json::json!(vol.dims));
-    obj.entry("dVoxel")
-        .or_insert_with(|| serde_json::json!(vol.spacing));
-    obj.entry("offOrigin")
-        .or_insert_with(|| serde_json::json!(vol.offset));
-    let geo: ConeBeam = serde_json::from_value(value).with_context(|| {
-        format!(
-            "--geometry {}: not a TIGRE/NAF geometry (fields DSD, DSO, nDetector, dDetector, \
-             optional nVoxel, dVoxel, offOrigin, offDetector, mode, accuracy)",
-            path.display()
-        )
-    })?;
-    geo.validate()
-        .with_context(|| format!("--geometry {}", path.display()))?;
-    Ok(geo)
 }
 
 fn project_and_write<R: Real>(

@@ -16,10 +16,10 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
-use ndarray::{Array1, Array2};
+use ndarray::Array2;
 
 use crate::gaussians::{ply, Gaussians};
-use crate::geometry::{Camera, ConeBeam};
+use crate::geometry::{self, Camera};
 use crate::image2d::Image2d;
 use crate::real::Real;
 use crate::render::{self, ColorMode, RenderSettings};
@@ -139,12 +139,7 @@ fn camera(args: &RenderArgs) -> anyhow::Result<Camera> {
         return Ok(ds.geometry.camera(angle));
     }
     if let (Some(g), Some(a)) = (&args.geometry, args.angle_deg) {
-        let text = std::fs::read_to_string(g)
-            .with_context(|| format!("cannot read geometry file {}", g.display()))?;
-        let geo: ConeBeam = serde_json::from_str(&text)
-            .with_context(|| format!("geometry file {}: not a TIGRE/NAF geometry", g.display()))?;
-        geo.validate()
-            .with_context(|| format!("geometry file {}", g.display()))?;
+        let geo = geometry::read_json(g, None).context("--geometry")?;
         if !a.is_finite() {
             bail!("--angle-deg must be finite (got {a})");
         }
@@ -155,18 +150,16 @@ fn camera(args: &RenderArgs) -> anyhow::Result<Camera> {
 
 /// The upstream gradient W, checked against the image shape.
 fn read_weights(path: &Path, cam: &Camera) -> anyhow::Result<Image2d<f64>> {
-    let arr: Array2<f64> = match ndarray_npy::read_npy::<_, Array2<f64>>(path) {
-        Ok(a) => a,
-        Err(_) => ndarray_npy::read_npy::<_, Array2<f32>>(path)
-            .map(|a| a.mapv(f64::from))
-            .with_context(|| {
-                format!(
-                    "--grad-weights {}: expected a 2-D f32 or f64 npy array [v, u]",
-                    path.display()
-                )
-            })?,
-    };
-    let (h, w) = arr.dim();
+    let arr = crate::volume::npy::read(path).context("--grad-weights")?;
+    if arr.shape.len() != 2 || !arr.is_float() {
+        bail!(
+            "--grad-weights {}: expected a 2-D f32 or f64 npy array [v, u], got {} {:?}",
+            path.display(),
+            arr.descr,
+            arr.shape
+        );
+    }
+    let (h, w) = (arr.shape[0], arr.shape[1]);
     if (h, w) != (cam.height, cam.width) {
         bail!(
             "--grad-weights {}: shape [{h}, {w}] does not match the detector [v, u] = [{}, {}]",
@@ -175,7 +168,7 @@ fn read_weights(path: &Path, cam: &Camera) -> anyhow::Result<Image2d<f64>> {
             cam.width
         );
     }
-    let data: Vec<f64> = arr.iter().copied().collect();
+    let data: Vec<f64> = arr.to_f64_c();
     crate::error::check_finite(&format!("--grad-weights {}", path.display()), &data)?;
     Ok(Image2d::from_vec(w, h, data))
 }
@@ -186,7 +179,7 @@ fn render_and_write<R: Real>(
     settings: &RenderSettings,
     weights: Option<&Image2d<f64>>,
 ) -> anyhow::Result<()> {
-    let g: Gaussians<R> = ply::read_ply(&args.ply)?;
+    let (g, layout): (Gaussians<R>, _) = ply::read_ply_with_layout(&args.ply)?;
     let (img, saved) = render::forward(&g, cam, settings)
         .with_context(|| format!("rendering {}", args.ply.display()))?;
     let img32: Vec<f32> = img.data.iter().map(|v| v.f64() as f32).collect();
@@ -202,55 +195,9 @@ fn render_and_write<R: Real>(
     if let Some(w) = weights {
         let d_image: Image2d<R> = w.cast();
         let grads = render::backward(&g, cam, settings, &saved, &d_image);
-        let n_rest = rest_per_channel(&args.ply)?;
         let path = args.out.join("grads.npz");
-        write_grads(&path, &grads.params, n_rest)?;
+        ply::StoredGrads::new(&grads.params, layout).write_npz(&path)?;
         println!("gradients of sum(W * image): {}", path.display());
     }
-    Ok(())
-}
-
-/// Number of `f_rest` coefficients per channel stored in the PLY (0, 3, 8 or 15).
-fn rest_per_channel(path: &Path) -> anyhow::Result<usize> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let end = bytes
-        .windows(10)
-        .position(|w| w == b"end_header")
-        .with_context(|| format!("{}: no PLY header", path.display()))?;
-    let header = String::from_utf8_lossy(&bytes[..end]);
-    let n = header
-        .lines()
-        .filter(|l| {
-            l.split_whitespace()
-                .last()
-                .is_some_and(|p| p.starts_with("f_rest_"))
-        })
-        .count();
-    Ok(n / 3)
-}
-
-/// Gradients with respect to the stored PLY fields (see the module header).
-fn write_grads<R: Real>(path: &Path, d: &Gaussians<R>, n_rest: usize) -> anyhow::Result<()> {
-    let n = d.len();
-    let f = |x: R| x.f64();
-    let xyz = Array2::from_shape_fn((n, 3), |(i, a)| f(d.means[i][a]));
-    let scale = Array2::from_shape_fn((n, 3), |(i, a)| f(d.log_scales[i][a]));
-    let rot = Array2::from_shape_fn((n, 4), |(i, a)| f(d.quats[i][a]));
-    let opacity = Array1::from_shape_fn(n, |i| f(d.opacity_logits[i]));
-    // Stored order: f_dc_0..2 (coefficient 0 per channel), then f_rest_{c * K + (k - 1)}.
-    let third = 1.0 / 3.0;
-    let features = Array2::from_shape_fn((n, 3 + 3 * n_rest), |(i, j)| {
-        let k = if j < 3 { 0 } else { (j - 3) % n_rest + 1 };
-        f(d.features[i][k]) * third
-    });
-    let file =
-        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    let mut npz = ndarray_npy::NpzWriter::new(file);
-    npz.add_array("xyz", &xyz)?;
-    npz.add_array("features", &features)?;
-    npz.add_array("opacity", &opacity)?;
-    npz.add_array("scale", &scale)?;
-    npz.add_array("rot", &rot)?;
-    npz.finish()?;
     Ok(())
 }

@@ -430,25 +430,23 @@ pub fn load(dir: &Path) -> Result<Dataset> {
     })
 }
 
-/// Read an npy as f32 (f64 files are accepted and rounded).
+/// Read a 3-D float npy (f64 files are accepted and rounded) as its shape and f32 values in
+/// C order; sizes are checked against the file length before anything is allocated.
 fn read_f32_array3(path: &Path) -> Result<Array3<f32>> {
-    if !path.exists() {
-        return Err(Error::io(
+    let a = crate::volume::npy::read(path)?;
+    if a.shape.len() != 3 || !a.is_float() {
+        return Err(Error::format(
             path,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "file not found"),
+            "npy",
+            format!(
+                "expected a 3-D f32 (or f64) npy array, got {} {:?}",
+                a.descr, a.shape
+            ),
         ));
     }
-    match ndarray_npy::read_npy::<_, Array3<f32>>(path) {
-        Ok(a) => Ok(a),
-        Err(e32) => match ndarray_npy::read_npy::<_, Array3<f64>>(path) {
-            Ok(a) => Ok(a.mapv(|v| v as f32)),
-            Err(_) => Err(Error::format(
-                path,
-                "npy",
-                format!("expected a 3-D f32 (or f64) npy array: {e32}"),
-            )),
-        },
-    }
+    let shape = (a.shape[0], a.shape[1], a.shape[2]);
+    Array3::from_shape_vec(shape, a.to_f32_c())
+        .map_err(|e| Error::format(path, "shape", e.to_string()))
 }
 
 fn read_split(path: &Path, name: &str, n: usize, h: usize, w: usize) -> Result<Vec<Image2d<f32>>> {

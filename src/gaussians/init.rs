@@ -301,18 +301,7 @@ mod tests {
     }
 
     fn geo(n: [usize; 3], d: [f64; 3]) -> ConeBeam {
-        ConeBeam {
-            dsd: 1500.0,
-            dso: 1000.0,
-            n_detector: [32, 32],
-            d_detector: [1.0, 1.0],
-            n_voxel: n,
-            d_voxel: d,
-            off_origin: [0.0; 3],
-            off_detector: [0.0; 2],
-            mode: crate::geometry::Mode::Cone,
-            accuracy: 0.5,
-        }
+        ConeBeam::centred([32, 32], [1.0, 1.0], n, d)
     }
 
     #[test]

@@ -10,6 +10,7 @@
 //! used by densification.
 
 pub mod composite;
+pub mod lanes;
 pub mod project;
 pub mod tiles;
 
@@ -29,6 +30,17 @@ pub enum ColorMode {
     /// View-dependent SH colour (3DGS baseline): i = max(0, 0.5 + SH(dir) . f), dir from the
     /// camera centre to the mean.
     Sh,
+}
+
+impl ColorMode {
+    /// The name used in files and on the command line (`rirf-paper`, `rirf-xgaussian`, `sh`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ColorMode::RirfPaper => "rirf-paper",
+            ColorMode::RirfXgaussian => "rirf-xgaussian",
+            ColorMode::Sh => "sh",
+        }
+    }
 }
 
 /// Rasterizer settings that are not part of the scene.

@@ -1,6 +1,7 @@
 //! Reports: markdown tables and SVG charts read from run folders (`metrics.json`, `log.csv`),
 //! so that reports never recompute anything.
 
+pub mod reproduce;
 pub mod svg;
 
 use std::fmt::Write as _;
@@ -137,7 +138,7 @@ pub fn read_log(run: &Path) -> Result<Vec<(f64, f64, f64)>> {
 }
 
 /// Moving mean over `w` consecutive values (the first w-1 outputs average what is there).
-fn moving_mean(v: &[f64], w: usize) -> Vec<f64> {
+pub(crate) fn moving_mean(v: &[f64], w: usize) -> Vec<f64> {
     let w = w.max(1);
     let mut out = Vec::with_capacity(v.len());
     let mut sum = 0.0;
@@ -152,7 +153,7 @@ fn moving_mean(v: &[f64], w: usize) -> Vec<f64> {
 }
 
 /// Keep at most `max` points, evenly spaced, always the last one.
-fn thin<T: Copy>(v: &[T], max: usize) -> Vec<T> {
+pub(crate) fn thin<T: Copy>(v: &[T], max: usize) -> Vec<T> {
     let step = v.len().div_ceil(max.max(1)).max(1);
     let mut out: Vec<T> = v.iter().step_by(step).copied().collect();
     if let Some(&last) = v.last() {

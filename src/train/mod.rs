@@ -531,18 +531,7 @@ mod tests {
             .map(|k| k as f64 * std::f64::consts::PI / 50.0)
             .collect();
         let ds = Dataset {
-            geometry: crate::geometry::ConeBeam {
-                dsd: 1500.0,
-                dso: 1000.0,
-                n_detector: [8, 8],
-                d_detector: [1.0, 1.0],
-                n_voxel: [8, 8, 8],
-                d_voxel: [1.0; 3],
-                off_origin: [0.0; 3],
-                off_detector: [0.0; 2],
-                mode: crate::geometry::Mode::Cone,
-                accuracy: 0.5,
-            },
+            geometry: crate::geometry::ConeBeam::centred([8, 8], [1.0, 1.0], [8, 8, 8], [1.0; 3]),
             train: Split {
                 angles,
                 projections: vec![],

@@ -9,6 +9,7 @@
 pub mod attenuation;
 pub mod metaimage;
 pub mod nifti;
+pub mod npy;
 pub mod phantom;
 pub mod resample;
 pub mod ultrasound;
@@ -169,7 +170,7 @@ pub fn load(path: &std::path::Path) -> crate::error::Result<Volume<f32>> {
     match format_of(path)? {
         Format::Nifti => nifti::read(path),
         Format::MetaImage => metaimage::read(path),
-        Format::Npy => read_npy(path),
+        Format::Npy => npy::read_volume(path),
     }
 }
 
@@ -242,9 +243,51 @@ fn format_of(path: &std::path::Path) -> crate::error::Result<Format> {
     }
 }
 
-/// Read a whole file, naming it in the error.
+/// Open `path` for reading, refusing anything but a regular file once symlinks are followed
+/// (a device such as `/dev/zero` or `/dev/urandom`, a FIFO or a directory has no length to check
+/// sizes against). Returns the file and its length in bytes.
+pub(crate) fn open_regular(path: &std::path::Path) -> crate::error::Result<(std::fs::File, u64)> {
+    let file = std::fs::File::open(path).map_err(|e| crate::error::Error::io(path, e))?;
+    let meta = file
+        .metadata()
+        .map_err(|e| crate::error::Error::io(path, e))?;
+    if !meta.is_file() {
+        return Err(crate::error::Error::format(
+            path,
+            "file",
+            format!(
+                "not a regular file ({}): only regular files are read",
+                if meta.is_dir() {
+                    "a directory"
+                } else {
+                    "a device, FIFO or socket"
+                }
+            ),
+        ));
+    }
+    Ok((file, meta.len()))
+}
+
+/// Read a whole regular file (see [`open_regular`]), naming it in the error.
 pub(crate) fn read_bytes(path: &std::path::Path) -> crate::error::Result<Vec<u8>> {
-    std::fs::read(path).map_err(|e| crate::error::Error::io(path, e))
+    use std::io::Read;
+    let (file, len) = open_regular(path)?;
+    let cap = usize::try_from(len).map_err(|_| {
+        crate::error::Error::format(
+            path,
+            "file",
+            format!("{len} bytes exceed the address space"),
+        )
+    })?;
+    let mut out = Vec::new();
+    out.try_reserve_exact(cap).map_err(|_| {
+        crate::error::Error::format(path, "file", format!("cannot hold {len} bytes in memory"))
+    })?;
+    // `take`: a file that grows while it is read cannot make us read past its length.
+    file.take(len)
+        .read_to_end(&mut out)
+        .map_err(|e| crate::error::Error::io(path, e))?;
+    Ok(out)
 }
 
 /// Scalar element types shared by the readers.
@@ -347,76 +390,4 @@ pub(crate) fn byte_count(
                 format!("{dims:?} voxels of {size} bytes overflow the address space"),
             )
         })
-}
-
-/// Read a `.npy` array `[x, y, z]` (f32, f64, u8 or i16; C or Fortran order) as a volume with
-/// 1 mm voxels.
-fn read_npy(path: &std::path::Path) -> crate::error::Result<Volume<f32>> {
-    use ndarray::Array3;
-    use ndarray_npy::{ReadNpyError, ReadNpyExt};
-    let bytes = read_bytes(path)?;
-    let fail = |e: ReadNpyError| {
-        let field = match &e {
-            ReadNpyError::ParseHeader(_) => "header",
-            ReadNpyError::WrongNdim(..) => "shape",
-            ReadNpyError::WrongDescriptor(_) => "descr",
-            _ => "data",
-        };
-        crate::error::Error::format(path, field, e.to_string())
-    };
-    // Try each supported dtype in turn; only a dtype mismatch moves on to the next.
-    type Attempt = Result<Option<(Vec<f32>, [usize; 3])>, ReadNpyError>;
-    fn attempt<T: ndarray_npy::ReadableElement + Copy>(
-        bytes: &[u8],
-        conv: fn(T) -> f32,
-    ) -> Attempt {
-        match Array3::<T>::read_npy(std::io::Cursor::new(bytes)) {
-            Ok(a) => {
-                let (nx, ny, nz) = a.dim();
-                // Reversing the axes gives [z, y, x]; its logical order is x fastest.
-                let t = a.reversed_axes();
-                let data: Vec<f32> = t.iter().map(|&v| conv(v)).collect();
-                Ok(Some((data, [nx, ny, nz])))
-            }
-            Err(ReadNpyError::WrongDescriptor(_)) => Ok(None),
-            Err(e) => Err(e),
-        }
-    }
-    type Try = fn(&[u8]) -> Attempt;
-    let tries: [(&str, Try); 4] = [
-        ("float32", |b| attempt::<f32>(b, |v| v)),
-        ("float64", |b| attempt::<f64>(b, |v| v as f32)),
-        ("uint8", |b| attempt::<u8>(b, |v| v as f32)),
-        ("int16", |b| attempt::<i16>(b, |v| v as f32)),
-    ];
-    for (name, f) in tries {
-        if let Some((data, dims)) = f(&bytes).map_err(fail)? {
-            if dims.contains(&0) {
-                return Err(crate::error::Error::format(
-                    path,
-                    "shape",
-                    format!("empty array of shape {dims:?}"),
-                ));
-            }
-            return Ok(Volume {
-                data,
-                dims,
-                spacing: [1.0; 3],
-                offset: [0.0; 3],
-                provenance: Provenance {
-                    source: path.display().to_string(),
-                    file_affine: None,
-                    steps: vec![format!(
-                        "read .npy {name} array [x, y, z] = {dims:?}; voxel size 1 mm assumed \
-                         (.npy carries none); centred (offset 0)"
-                    )],
-                },
-            });
-        }
-    }
-    Err(crate::error::Error::format(
-        path,
-        "descr",
-        "unsupported dtype: .npy volumes must be float32, float64, uint8 or int16",
-    ))
 }

@@ -13,10 +13,16 @@
 //!   is taken as mm). A zero or non-finite voxel size is an error.
 //! - Affine (recorded only): sform when `sform_code > 0`, else the quaternion qform when
 //!   `qform_code > 0` (computed here as in nifti1_io's `nifti_quatern_to_mat44`), else
-//!   diag(pixdim) (ANALYZE "method 1").
+//!   diag(pixdim) (ANALYZE "method 1"). An affine with a NaN or infinite entry is dropped with
+//!   a note in the provenance (it is informational only).
+//! - Input limits: only regular files are read (a symlink to `/dev/urandom` is refused); only
+//!   the bytes the header needs are read, and a `.gz` is decompressed only that far (trailing
+//!   bytes after the voxel data, such as zero padding, are never looked at); the claimed data
+//!   size is checked against the file length (times deflate's largest ratio, 1032, for `.gz`)
+//!   before reading it.
 //! - The array index (i, j, k) is our (x, y, z); the volume is centred (offset 0).
 
-use super::{byte_count, decode, read_bytes, Elem, Provenance, Volume};
+use super::{byte_count, decode, open_regular, Elem, Provenance, Volume};
 use crate::error::{Error, Result};
 use std::io::Read;
 use std::path::Path;
@@ -50,34 +56,94 @@ pub struct Header {
     pub srow: [[f32; 4]; 3],
 }
 
-/// Read the file's bytes, gunzipping `.gz`.
+/// Largest ratio of deflate's output to its input (a stored zero byte costs at least about
+/// 1/1032 of a byte): a gzip file of `n` bytes cannot decompress to more than `n * 1032`.
+const DEFLATE_MAX_RATIO: u64 = 1032;
+
+/// Read up to `n` bytes of `src` into `buf` (fewer only when the stream ends).
+fn fill(src: &mut impl Read, buf: &mut Vec<u8>, n: usize) -> std::io::Result<()> {
+    if buf.len() < n {
+        // Reserve at most 64 MiB ahead; beyond that the vector grows with what actually arrives.
+        buf.reserve((n - buf.len()).min(1 << 26));
+        src.by_ref().take((n - buf.len()) as u64).read_to_end(buf)?;
+    }
+    Ok(())
+}
+
+/// The bytes a header asks for: `vox_offset` + the voxel data, when the header fields needed
+/// for that are valid (else `None`: [`read`] then reports the bad field).
+fn needed_len(path: &Path, b: &[u8]) -> Option<usize> {
+    let h = parse_header(path, b).ok()?;
+    let a = [b[72], b[73]];
+    let bitpix = if h.big_endian {
+        i16::from_be_bytes(a)
+    } else {
+        i16::from_le_bytes(a)
+    };
+    let elem = element_type(path, h.datatype, bitpix).ok()?;
+    let off = h.vox_offset;
+    if !(off.is_finite() && off >= HEADER_LEN as f32 && off.fract() == 0.0) {
+        return None;
+    }
+    let need = byte_count(path, "dim", h.dims, elem.size()).ok()?;
+    (off as usize).checked_add(need)
+}
+
+/// Read the bytes the header needs (header, extensions, voxel data), gunzipping `.gz`; never
+/// more. A `.gz` is decompressed only as far as the voxel data reaches, so trailing bytes
+/// (zero padding, another gzip member, gigabytes of zeros) are never read; the gzip size field
+/// is not used. Only regular files are read.
 fn file_bytes(path: &Path) -> Result<Vec<u8>> {
-    let raw = read_bytes(path)?;
+    let (file, len) = open_regular(path)?;
     let gz = path
         .file_name()
         .map(|n| n.to_string_lossy().to_ascii_lowercase().ends_with(".gz"))
         .unwrap_or(false);
-    if !gz {
-        return Ok(raw);
+    let gzip_err = |e: std::io::Error| {
+        Error::format(
+            path,
+            "gzip",
+            format!("truncated or corrupt gzip stream: {e}"),
+        )
+    };
+    let mut buf = Vec::new();
+    let mut src: Box<dyn Read> = if gz {
+        Box::new(flate2::read::MultiGzDecoder::new(std::io::BufReader::new(
+            file,
+        )))
+    } else {
+        Box::new(file)
+    };
+    let io_err = |e: std::io::Error| if gz { gzip_err(e) } else { Error::io(path, e) };
+    fill(&mut src, &mut buf, HEADER_LEN).map_err(io_err)?;
+    let Some(total) = needed_len(path, &buf) else {
+        return Ok(buf);
+    };
+    let most = if gz {
+        len.saturating_mul(DEFLATE_MAX_RATIO)
+    } else {
+        len
+    };
+    if total as u64 > most {
+        let h = parse_header(path, &buf)?;
+        return Err(Error::format(
+            path,
+            "dim",
+            if gz {
+                format!(
+                    "{:?} voxels need {total} bytes after decompression; a {len}-byte gzip file                      cannot hold more than {most} (truncated file, or a false header)",
+                    h.dims
+                )
+            } else {
+                format!(
+                    "truncated: {:?} voxels need {total} bytes (vox_offset + data), the file                      holds {len}",
+                    h.dims
+                )
+            },
+        ));
     }
-    // The gzip footer holds the uncompressed size mod 2^32: a capacity hint only, bounded by
-    // deflate's largest ratio (about 1032:1).
-    let hint = raw
-        .len()
-        .checked_sub(4)
-        .map(|n| u32::from_le_bytes([raw[n], raw[n + 1], raw[n + 2], raw[n + 3]]) as usize)
-        .unwrap_or(0);
-    let mut out = Vec::with_capacity(hint.min(raw.len().saturating_mul(1032)));
-    flate2::read::MultiGzDecoder::new(&raw[..])
-        .read_to_end(&mut out)
-        .map_err(|e| {
-            Error::format(
-                path,
-                "gzip",
-                format!("truncated or corrupt gzip stream: {e}"),
-            )
-        })?;
-    Ok(out)
+    fill(&mut src, &mut buf, total).map_err(io_err)?;
+    Ok(buf)
 }
 
 /// Parse the 348-byte header at the start of `b`.
@@ -425,9 +491,18 @@ pub fn read(path: &Path) -> Result<Volume<f32>> {
             h.scl_slope
         ),
     });
-    steps.push(format!(
-        "file affine from {affine_from}, in mm; recorded, not applied"
-    ));
+    let file_affine = if affine.iter().flatten().all(|v| v.is_finite()) {
+        steps.push(format!(
+            "file affine from {affine_from}, in mm; recorded, not applied"
+        ));
+        Some(affine)
+    } else {
+        steps.push(format!(
+            "file affine from {affine_from} has a NaN or infinite entry (in mm: {affine:?}); \
+             dropped (it is informational only: placement never uses it)"
+        ));
+        None
+    };
     Ok(Volume {
         data,
         dims: h.dims,
@@ -435,7 +510,7 @@ pub fn read(path: &Path) -> Result<Volume<f32>> {
         offset: [0.0; 3],
         provenance: Provenance {
             source: path.display().to_string(),
-            file_affine: Some(affine),
+            file_affine,
             steps,
         },
     })
