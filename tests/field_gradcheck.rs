@@ -321,3 +321,32 @@ fn bad_settings_name_the_setting() {
         _ => panic!("naf uses the hash grid"),
     }
 }
+
+#[test]
+fn diverging_run_names_the_iteration() {
+    use unispine::dataset::generate::{generate, GenerateOptions};
+    let mut vol = unispine::volume::Volume::<f32>::zeros([8, 8, 8], [10.0; 3]);
+    vol.data.iter_mut().for_each(|v| *v = 0.02);
+    let opts = GenerateOptions {
+        train_views: 2,
+        test_views: 1,
+        detector: 8,
+        ..Default::default()
+    };
+    let ds = generate(&vol, &opts, &|_, _| {}).unwrap();
+    let mut cfg = FieldConfig::preset("nerf", 2).unwrap();
+    cfg.hidden_dim = 8;
+    cfg.n_rays = 8;
+    cfg.n_samples = 4;
+    // Adam moves every parameter by about lr: 1e30 at step 1, then the f32 products overflow.
+    cfg.lr = 1e30;
+    let mut tr = unispine::field::train::FieldTrainer::new(cfg, &ds).unwrap();
+    let first = tr.step().unwrap();
+    assert_eq!(first.iteration, 1);
+    let e = tr.step().unwrap_err();
+    assert!(
+        matches!(e, unispine::Error::Diverged { iteration: 2, .. }),
+        "{e}"
+    );
+    assert!(e.to_string().contains("iteration 2"), "{e}");
+}
