@@ -108,7 +108,7 @@ pub fn score_line_integrals(pred: &[Image2d<f32>], gt: &[Image2d<f32>]) -> Resul
             ));
         }
         crate::error::check_finite(&format!("prediction {k}"), &p.data)?;
-        let target = eval::normalise_gt(g, &what)?;
+        let target = crate::dataset::targets::normalise_gt(g, &what)?;
         let (lo, hi) = g
             .data
             .iter()
@@ -230,7 +230,6 @@ pub fn run_fdk(ds: &Dataset) -> Result<(Outcome, Volume<f32>)> {
         extent: 0.0,
         render: Default::default(),
         threads: rayon::current_num_threads(),
-        model_params: Some(params),
         model_bytes: Some(params * 4),
     };
     let config = serde_json::json!({
@@ -257,7 +256,13 @@ pub fn run_fdk(ds: &Dataset) -> Result<(Outcome, Volume<f32>)> {
 }
 
 /// Write the run folder `dir` of an outcome (the model is written by the caller).
-pub fn write_run(dir: &Path, ds: &Dataset, o: &Outcome, previews: usize) -> Result<()> {
+pub fn write_run(
+    dir: &Path,
+    rd: &crate::train::RunDir,
+    ds: &Dataset,
+    o: &Outcome,
+    previews: usize,
+) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let w = |name: &str, text: String| -> Result<()> {
         let p = dir.join(name);
@@ -290,11 +295,7 @@ pub fn write_run(dir: &Path, ds: &Dataset, o: &Outcome, previews: usize) -> Resu
                 img.data.iter().map(|&x| (x - lo) / r).collect(),
             )
         };
-        crate::train::write_preview(
-            &pdir.join(format!("test_{v:02}.png")),
-            &map(render),
-            &map(gt),
-        )?;
+        rd.write_preview(&format!("test_{v:02}.png"), &map(render), &map(gt))?;
     }
     w(
         "metrics.json",
@@ -348,9 +349,9 @@ pub fn run(
         }
     };
     if let Some(dir) = out {
-        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        let rd = crate::train::RunDir::create(dir)?;
         write_model(dir)?;
-        write_run(dir, ds, &o, 4)?;
+        write_run(dir, &rd, ds, &o, 4)?;
     }
     Ok(o.metrics)
 }
@@ -443,7 +444,6 @@ pub fn run_field(
         extent: 0.0,
         render: Default::default(),
         threads: rayon::current_num_threads(),
-        model_params: Some(params),
         model_bytes: Some(params * 4),
     };
     let mut config = serde_json::to_value(&cfg).expect("config serialises");

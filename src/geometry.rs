@@ -1,7 +1,8 @@
 //! Cone-beam (and parallel-beam) scanner geometry with the TIGRE / NAF field names, and the
 //! per-angle pinhole [`Camera`] used by both the DRR ray-marcher and the Gaussian rasterizer.
 //!
-//! Conventions (research/xgaussian_unispine.md §2, DESIGN.md):
+//! Conventions (NAF `Ruyi-Zha/naf_cbct` `src/dataset/tigre.py`: `angle2pose`, `get_rays`; the
+//! same pose in X-Gaussian `caiyuanhao1998/X-Gaussian` `scene/dataset_readers.py`):
 //! - Lengths in millimetres, angles in radians.
 //! - Source on the circle of radius `DSO` in the z = 0 plane at angle θ, rotating about world +z:
 //!   camera centre c = (DSO cos θ, DSO sin θ, 0).

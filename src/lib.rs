@@ -11,14 +11,20 @@
 //!   -> gaussians (Eq. 1 model, Eq. 2 RIRF, ACUI init, PLY)
 //!   -> render (Eqs. 3-5: projection, tiles, compositing; forward + backward)
 //!   -> loss (Eqs. 6-9: SPWM, weighted Charbonnier, SSIM)
-//!   -> optim (Adam, schedules) -> densify -> train -> eval -> report
+//!   -> optim (Adam, schedules) -> densify -> eval (PSNR, SSIM, fps) -> train -> report
 //! ```
+
+// The library never prints (progress leaves as events, `train::event`); only `cli` does.
+#![cfg_attr(not(test), warn(clippy::print_stdout, clippy::print_stderr))]
 
 // Foundations shared by every stage.
 pub mod error;
+/// Atomic file writes (temporary name + rename) and output-folder hygiene.
+pub mod fsio;
 pub mod image2d;
 pub mod math;
 pub mod par;
+pub mod preview;
 pub mod real;
 pub mod simd;
 
@@ -62,7 +68,7 @@ pub mod field;
 /// Method presets and the training loop.
 pub mod train;
 
-/// Evaluation: PSNR, SSIM, fps.
+/// Evaluation: PSNR, SSIM, fps (also run inside the training loop).
 pub mod eval;
 
 /// Table 1's baselines behind `train --method`: scoring of predicted line integrals, run folder.
@@ -78,6 +84,7 @@ pub mod reproduce;
 pub mod audit;
 
 // Front end.
+#[allow(clippy::print_stdout, clippy::print_stderr)]
 pub mod cli;
 
 pub use error::{Error, Result};

@@ -62,7 +62,7 @@ fn fdk_run_folder_is_a_report_row() {
     assert!(psnr > 22.0 && psnr < 60.0, "psnr {psnr}");
     assert!(m.test_ssim.unwrap() > 0.7);
     assert!(m.render_fps.unwrap() > 0.0 && m.train_time_s > 0.0);
-    assert_eq!(m.model_params, Some(32 * 32 * 32));
+    assert_eq!(m.model_bytes, Some(32 * 32 * 32 * 4));
     let vol: ndarray::Array3<f32> = ndarray_npy::read_npy(d.join("fdk/model.npy")).unwrap();
     assert_eq!(vol.dim(), (32, 32, 32));
     assert!(d.join("fdk/log.csv").exists() && d.join("fdk/config.json").exists());

@@ -209,34 +209,30 @@ fn bad_inputs_are_clear_errors() {
     let out = dir.path().join("out").display().to_string();
     let (g, p) = (geo.display().to_string(), ply.display().to_string());
 
-    let o = run(&[
-        "render",
-        "--ply",
-        "nope.ply",
-        "--geometry",
-        &g,
-        "--angle-deg",
-        "0",
-        "--out",
-        &out,
-    ]);
+    let args_for = |ply: &str| -> Vec<String> {
+        [
+            "render",
+            "--ply",
+            ply,
+            "--geometry",
+            g.as_str(),
+            "--angle-deg",
+            "0",
+            "--out",
+            out.as_str(),
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let o = run(&args_for("nope.ply"));
     assert!(!o.ok);
     assert!(o.stderr.contains("nope.ply"));
 
     let wrong = dir.path().join("w.npy");
     ndarray_npy::write_npy(&wrong, &Array2::<f32>::zeros((5, 5))).unwrap();
     let wp = wrong.display().to_string();
-    let args = [
-        "render",
-        "--ply",
-        &p,
-        "--geometry",
-        &g,
-        "--angle-deg",
-        "0",
-        "--out",
-        &out,
-    ];
+    let args = args_for(&p);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let o = run(&[&args[..], &["--grad-weights", &wp]].concat());
     assert!(!o.ok);
     let e = o.stderr;

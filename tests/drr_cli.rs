@@ -22,6 +22,25 @@ fn write_geometry(path: &Path, extra: &str) {
     common::cli::write_geometry(path, [300.0, 200.0], [9, 11], 3.0, extra);
 }
 
+/// `unispine drr --volume VOL --geometry GEO --out OUT EXTRA...`, with `--angles-deg 0` unless
+/// EXTRA gives the angles.
+fn drr(vol: &Path, geo: &Path, out: &Path, extra: &[&str]) -> Run {
+    let mut args = vec![
+        "drr",
+        "--volume",
+        vol.to_str().unwrap(),
+        "--geometry",
+        geo.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    if !extra.contains(&"--angles-deg") {
+        args.extend_from_slice(&["--angles-deg", "0"]);
+    }
+    run(&args)
+}
+
 #[test]
 fn drr_writes_projections_pngs_and_metadata() {
     let dir = tempfile::tempdir().unwrap();
@@ -33,19 +52,12 @@ fn drr_writes_projections_pngs_and_metadata() {
         let out = dir.path().join(method);
         let Run {
             ok, stderr: err, ..
-        } = run(&[
-            "drr",
-            "--volume",
-            vol.to_str().unwrap(),
-            "--geometry",
-            geo.to_str().unwrap(),
-            "--angles-deg",
-            "0,90,-45",
-            "--method",
-            method,
-            "--out",
-            out.to_str().unwrap(),
-        ]);
+        } = drr(
+            &vol,
+            &geo,
+            &out,
+            &["--angles-deg", "0,90,-45", "--method", method],
+        );
         assert!(ok, "{method}: {err}");
         let p: ndarray::ArrayD<f32> = ndarray_npy::read_npy(out.join("projections.npy")).unwrap();
         let p = p.into_dimensionality::<Ix3>().unwrap();
@@ -99,21 +111,7 @@ fn drr_f64_and_hu_conversion() {
     let out = dir.path().join("o");
     let Run {
         ok, stderr: err, ..
-    } = run(&[
-        "drr",
-        "--volume",
-        vol.to_str().unwrap(),
-        "--geometry",
-        geo.to_str().unwrap(),
-        "--angles-deg",
-        "0",
-        "--precision",
-        "f64",
-        "--hu",
-        "naf-mu",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    } = drr(&vol, &geo, &out, &["--precision", "f64", "--hu", "naf-mu"]);
     assert!(ok, "{err}");
     let p: ndarray::ArrayD<f32> = ndarray_npy::read_npy(out.join("projections.npy")).unwrap();
     assert!(
@@ -129,23 +127,9 @@ fn expect_error(args_extra: &[&str], vol_nan: bool, geo_extra: &str, needle: &[&
     let geo = dir.path().join("geo.json");
     write_volume(&vol, 1.0, vol_nan.then_some([3, 4, 5]));
     write_geometry(&geo, geo_extra);
-    let out = dir.path().join("o");
-    let mut args = vec![
-        "drr",
-        "--volume",
-        vol.to_str().unwrap(),
-        "--geometry",
-        geo.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    args.extend_from_slice(args_extra);
-    if !args_extra.contains(&"--angles-deg") {
-        args.extend_from_slice(&["--angles-deg", "0"]);
-    }
     let Run {
         ok, stderr: err, ..
-    } = run(&args);
+    } = drr(&vol, &geo, &dir.path().join("o"), args_extra);
     assert!(!ok, "expected a failure for {args_extra:?} {geo_extra}");
     assert!(!err.contains("panicked"), "{err}");
     for n in needle {
@@ -162,17 +146,7 @@ fn drr_bad_inputs_give_clear_errors() {
     let missing = dir.path().join("nope.nii.gz");
     let Run {
         ok, stderr: err, ..
-    } = run(&[
-        "drr",
-        "--volume",
-        missing.to_str().unwrap(),
-        "--geometry",
-        geo.to_str().unwrap(),
-        "--angles-deg",
-        "0",
-        "--out",
-        dir.path().join("o").to_str().unwrap(),
-    ]);
+    } = drr(&missing, &geo, &dir.path().join("o"), &[]);
     assert!(!ok && err.contains("nope.nii.gz"), "{err}");
     // NaN voxel: the voxel is named.
     expect_error(&[], true, "", &["(3, 4, 5)"]);
@@ -198,19 +172,10 @@ fn drr_missing_geometry_file_is_named() {
     let dir = tempfile::tempdir().unwrap();
     let vol = dir.path().join("vol.npy");
     write_volume(&vol, 1.0, None);
+    let missing = dir.path().join("missing.json");
     let Run {
         ok, stderr: err, ..
-    } = run(&[
-        "drr",
-        "--volume",
-        vol.to_str().unwrap(),
-        "--geometry",
-        dir.path().join("missing.json").to_str().unwrap(),
-        "--angles-deg",
-        "0",
-        "--out",
-        dir.path().join("o").to_str().unwrap(),
-    ]);
+    } = drr(&vol, &missing, &dir.path().join("o"), &[]);
     assert!(!ok && err.contains("missing.json"), "{err}");
 }
 

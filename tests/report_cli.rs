@@ -1,5 +1,5 @@
-//! `unispine report`: the table rows come from each run's metrics.json; a folder without one is
-//! an error naming the file.
+//! `unispine report`: the table rows come from each run's metrics.json; a folder without one
+//! gets a row saying so (the others are still reported), a stopped run shows no PSNR.
 
 use std::ffi::OsStr;
 
@@ -22,12 +22,11 @@ fn metrics(method: &str, psnr: f64, n: usize) -> Metrics {
         render_fps: Some(41.25),
         render_fps_protocol: String::new(),
         n_gaussians: n,
+        model_bytes: None,
         peak_memory_bytes: Some(3 * 1024 * 1024),
         extent: 1285.36,
         render: RenderSettings::default(),
         threads: 2,
-        model_params: None,
-        model_bytes: None,
     }
 }
 
@@ -61,10 +60,44 @@ fn report_prints_one_row_per_run_and_names_missing_files() {
     );
     assert!(rows[1].starts_with("| b | 3dgs |"), "{}", rows[1]);
 
+    // A folder without metrics.json and a stopped run, beside a finished one.
     let missing = dir.path().join("nothing-here");
     std::fs::create_dir_all(&missing).unwrap();
-    let err = cli::fails(&[OsStr::new("report"), missing.as_os_str()]);
-    assert!(err.contains("metrics.json"), "{err}");
+    let mut stopped = metrics("unispine", 30.0, 99);
+    stopped.completed = false;
+    stopped.test_psnr = None;
+    stopped.test_ssim = None;
+    stopped.render_fps = None;
+    let sd = dir.path().join("stopped");
+    std::fs::create_dir_all(&sd).unwrap();
+    std::fs::write(
+        sd.join("metrics.json"),
+        serde_json::to_string(&stopped).unwrap(),
+    )
+    .unwrap();
+    let a = dir.path().join("a");
+    let table = cli::ok(&[
+        OsStr::new("report"),
+        missing.as_os_str(),
+        sd.as_os_str(),
+        a.as_os_str(),
+    ]);
+    let rows: Vec<&str> = table.lines().skip(2).collect();
+    assert!(
+        rows[0].starts_with("| nothing-here | no metrics.json"),
+        "{}",
+        rows[0]
+    );
+    assert!(
+        rows[1].starts_with("| stopped | unispine | 1000 (stopped) | - | - |"),
+        "{}",
+        rows[1]
+    );
+    assert!(rows[2].starts_with("| a | unispine |"), "{}", rows[2]);
+    // A folder that does not exist is still an error naming it.
+    let gone = dir.path().join("no-such-run");
+    let err = cli::fails(&[OsStr::new("report"), gone.as_os_str()]);
+    assert!(err.contains("no-such-run"), "{err}");
 }
 
 /// `--charts DIR` writes tradeoff.svg (one marker per run in each panel, placed by value) and

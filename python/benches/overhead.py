@@ -2,7 +2,7 @@
 
 Scene: 50,000 Gaussians in a 200 mm cube, cone beam (DSD 1500 mm, DSO 1000 mm), 256 x 256
 detector of 1.5 mm pixels, float32 (the training precision) and float64. For each precision,
-the same scene is rendered `--repeats` times through `unispine.rasterize` (argument reading and
+the same scene is rendered `--repeats` times, alternately, through `unispine.rasterize` (argument reading and
 checking, output arrays) and through the Rust `render::forward` alone, timed inside Rust; the
 script prints both medians and the overhead. Run from the repository root after
 `pip install ./python`:
@@ -40,12 +40,13 @@ def main():
         ps = [p.astype(dtype) for p in scene]
         kw = dict(geometry=GEOMETRY, angles=0.7)
         unispine.rasterize(*ps, **kw)  # warm-up
-        py_times = []
+        # Interleaved, so that a change of machine load affects both series alike.
+        py_times, rust_times = [], []
         for _ in range(a.repeats):
             t0 = time.perf_counter()
             unispine.rasterize(*ps, **kw)
             py_times.append(time.perf_counter() - t0)
-        rust_times = _native._bench_render_forward(*ps, repeats=a.repeats, **kw)
+            rust_times += _native._bench_render_forward(*ps, repeats=1, **kw)
         py_med, rust_med = statistics.median(py_times), statistics.median(rust_times)
         print(f"{np.dtype(dtype).name}: python unispine.rasterize {py_med * 1e3:8.2f} ms   "
               f"rust render::forward {rust_med * 1e3:8.2f} ms   "

@@ -364,6 +364,111 @@ fn project<'py>(
     })
 }
 
+/// Vector-Jacobian product of ``project``: the gradient of
+/// L = sum(d_means2d * means2d) + sum(d_conics * conics) + sum(d_opacities * opacities)
+/// + sum(d_colors * colors) with respect to the Gaussians, summed over cameras in camera order.
+/// This is the projection stage's backward on its own (the golden files
+/// ``eq03-projection-vjp`` check exactly this with ``d_opacities = d_colors = 0``).
+///
+/// Gaussians and cameras as ``project``. Upstream gradients, per camera (dtype of ``means``):
+/// ``d_means2d`` [C, N, 2] (pixels), ``d_conics`` [C, N, 3] (A, B, C; B one parameter),
+/// ``d_opacities`` [C, N] (post-sigmoid; default zeros), ``d_colors`` [C, N] (default zeros).
+/// Culled Gaussians (radius 0 in that camera) get exact zeros from that camera.
+///
+/// Returns a dict: ``d_means`` [N, 3], ``d_quats`` [N, 4], ``d_log_scales`` [N, 3],
+/// ``d_opacity_logits`` [N], ``d_features`` [N, 16]. The GIL is released.
+#[pyfunction]
+#[pyo3(signature = (means, quats, log_scales, opacity_logits, features, viewmats=None, Ks=None,
+    width=None, height=None, *, d_means2d, d_conics, d_opacities=None, d_colors=None,
+    camera_model="pinhole", geometry=None, angles=None, color_mode="rirf-paper",
+    active_features=16))]
+#[allow(non_snake_case, clippy::too_many_arguments)]
+fn project_vjp<'py>(
+    py: Python<'py>,
+    means: &Bound<'py, PyAny>,
+    quats: &Bound<'py, PyAny>,
+    log_scales: &Bound<'py, PyAny>,
+    opacity_logits: &Bound<'py, PyAny>,
+    features: &Bound<'py, PyAny>,
+    viewmats: Option<&Bound<'py, PyAny>>,
+    Ks: Option<&Bound<'py, PyAny>>,
+    width: Option<usize>,
+    height: Option<usize>,
+    d_means2d: &Bound<'py, PyAny>,
+    d_conics: &Bound<'py, PyAny>,
+    d_opacities: Option<&Bound<'py, PyAny>>,
+    d_colors: Option<&Bound<'py, PyAny>>,
+    camera_model: &str,
+    geometry: Option<&Bound<'py, PyAny>>,
+    angles: Option<&Bound<'py, PyAny>>,
+    color_mode: &str,
+    active_features: usize,
+) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+    let s = args::settings(color_mode, active_features, 0.0)?;
+    with_dtype!(args::dtype_of("means", means)?, R, {
+        let (g, cams) = gaussians_and_cameras::<R>(
+            means,
+            quats,
+            log_scales,
+            opacity_logits,
+            features,
+            viewmats,
+            Ks,
+            width,
+            height,
+            camera_model,
+            geometry,
+            angles,
+        )?;
+        let (c, n) = (cams.len(), g.len());
+        let flat = |name: &str, obj: Option<&Bound<'py, PyAny>>| -> PyResult<Vec<R>> {
+            match obj {
+                Some(o) => Ok(args::read::<R>(name, o, &[Some(c), Some(n)])?.0),
+                None => Ok(vec![<R as unispine::Real>::c(0.0); c * n]),
+            }
+        };
+        let with_rows = |name: &str, obj: &Bound<'py, PyAny>, k: usize| -> PyResult<Vec<R>> {
+            Ok(args::read::<R>(name, obj, &[Some(c), Some(n), Some(k)])?.0)
+        };
+        let m2 = with_rows("d_means2d", d_means2d, 2)?;
+        let co = with_rows("d_conics", d_conics, 3)?;
+        let up = raster::SplatUpstream {
+            means2d: m2.chunks_exact(2).map(|x| [x[0], x[1]]).collect(),
+            conics: co.chunks_exact(3).map(|x| [x[0], x[1], x[2]]).collect(),
+            opacities: flat("d_opacities", d_opacities)?,
+            colors: flat("d_colors", d_colors)?,
+        };
+        let p = py
+            .detach(|| raster::project_vjp(&g, &cams, &s, &up))
+            .map_err(args::lib_err)?;
+        dict(
+            py,
+            vec![
+                (
+                    "d_means",
+                    out(py, &[n, 3], p.means.into_flattened())?.into_any(),
+                ),
+                (
+                    "d_quats",
+                    out(py, &[n, 4], p.quats.into_flattened())?.into_any(),
+                ),
+                (
+                    "d_log_scales",
+                    out(py, &[n, 3], p.log_scales.into_flattened())?.into_any(),
+                ),
+                (
+                    "d_opacity_logits",
+                    out(py, &[n], p.opacity_logits)?.into_any(),
+                ),
+                (
+                    "d_features",
+                    out(py, &[n, 16], p.features.into_flattened())?.into_any(),
+                ),
+            ],
+        )
+    })
+}
+
 /// Digitally reconstructed radiographs: line integrals of ``volume`` along the rays of the
 /// cameras of ``geometry`` at ``angles``.
 ///
@@ -534,6 +639,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterize, m)?)?;
     m.add_function(wrap_pyfunction!(rasterize_vjp, m)?)?;
     m.add_function(wrap_pyfunction!(project, m)?)?;
+    m.add_function(wrap_pyfunction!(project_vjp, m)?)?;
     m.add_function(wrap_pyfunction!(drr, m)?)?;
     m.add_function(wrap_pyfunction!(ssim, m)?)?;
     m.add_function(wrap_pyfunction!(loss, m)?)?;

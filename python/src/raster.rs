@@ -202,3 +202,40 @@ pub fn dict<'py>(
     }
     Ok(d)
 }
+
+/// Upstream gradients of the splats of every camera, concatenated in camera order (the
+/// layout of `project`'s outputs).
+pub struct SplatUpstream<R: Float> {
+    pub means2d: Vec<[R; 2]>,
+    pub conics: Vec<[R; 3]>,
+    pub opacities: Vec<R>,
+    pub colors: Vec<R>,
+}
+
+/// The projection stage's VJP per camera, summed over cameras in camera order.
+pub fn project_vjp<R: Float>(
+    g: &Gaussians<R>,
+    cams: &[Camera],
+    s: &RenderSettings,
+    up: &SplatUpstream<R>,
+) -> unispine::Result<Gaussians<R>> {
+    let n = g.len();
+    let mut acc = Gaussians::zeros(n);
+    for (k, cam) in cams.iter().enumerate() {
+        let (_, saved) = project::forward(g, cam, s)?;
+        let r = k * n..(k + 1) * n;
+        let d = render::SplatGrads {
+            mean2d: up.means2d[r.clone()].to_vec(),
+            conic: up.conics[r.clone()].to_vec(),
+            opacity: up.opacities[r.clone()].to_vec(),
+            color: up.colors[r].to_vec(),
+        };
+        let dp = project::backward(g, cam, s, &saved, &d);
+        if cams.len() == 1 {
+            acc = dp;
+        } else {
+            add(&mut acc, &dp);
+        }
+    }
+    Ok(acc)
+}

@@ -106,3 +106,32 @@ def test_golden_cases_select_folders_and_hold_the_vjp_cases():
     assert case["inputs"]["d_mean2d"].shape == (len(case["inputs"]["means"]), 2)
     assert case["outputs"]["d_quats"].dtype == np.float64
     assert case["tolerance"]["abs"] > 0 and "complex step" in case["checked_by"]
+
+
+@pytest.mark.parametrize("case", unispine.golden_cases("eq03-projection-vjp"),
+                         ids=lambda c: c["name"])
+def test_project_vjp_matches_the_eq03_vjp_goldens(case):
+    inp = case["inputs"]
+    n = len(inp["means"])
+    g = unispine.project_vjp(inp["means"], inp["quats"], inp["log_scales"], np.zeros(n),
+                             np.zeros((n, 16)), geometry=inp["geometry"], angles=inp["angle"],
+                             d_means2d=inp["d_mean2d"][None], d_conics=inp["d_conic"][None])
+    for k in ("d_means", "d_log_scales", "d_quats"):
+        check(case, k, g[k])
+    assert not g["d_features"].any() and not g["d_opacity_logits"].any()
+
+
+def test_rasterize_vjp_is_composite_backward_then_project_vjp():
+    """The screen-space gradients that rasterize_vjp exposes, pushed through project_vjp, give
+    its parameter gradients (two cameras: summed in camera order)."""
+    from conftest import params, scene
+    ps = params(scene(80, seed=9))
+    kw = dict(geometry=GEOMETRY, angles=[0.3, 2.0], color_mode="sh")
+    d = np.random.default_rng(3).normal(size=(2, 48, 64))
+    full = unispine.rasterize_vjp(*ps, d_image=d, **kw)
+    staged = unispine.project_vjp(*ps, d_means2d=full["d_means2d"], d_conics=full["d_conics"],
+                                  d_opacities=full["d_opacities"], d_colors=full["d_colors"],
+                                  **kw)
+    for k in ("means", "quats", "log_scales", "opacity_logits", "features"):
+        assert np.array_equal(staged["d_" + k], full["d_" + k]), k
+    assert (full["radii"] > 0).sum() > 40

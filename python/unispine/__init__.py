@@ -4,7 +4,8 @@ A deterministic, f64-capable oracle for checking GPU rasterizers and their gradi
 
 - ``rasterize`` / ``rasterize_vjp``: the tile rasterizer (Eqs. 1-5) and its exact
   vector-Jacobian product (every parameter group, and the screen-space splat gradients);
-- ``project``: the projection stage alone (means2d, conics, radii, depths);
+- ``project`` / ``project_vjp``: the projection stage alone (means2d, conics, radii, depths)
+  and its backward;
 - ``drr``: Siddon and trilinear DRRs of a volume;
 - ``ssim``, ``loss``: SSIM and the hybrid loss of Eq. (8) with their gradients;
 - ``golden_cases``: the repository's golden files as dicts of numpy arrays.
@@ -20,13 +21,14 @@ import json as _json
 
 import numpy as _np
 
-from ._native import drr, loss, project, rasterize, rasterize_vjp, ssim
+from ._native import drr, loss, project, project_vjp, rasterize, rasterize_vjp, ssim
 from . import _native
 
 __all__ = [
     "rasterize",
     "rasterize_vjp",
     "project",
+    "project_vjp",
     "drr",
     "ssim",
     "loss",

@@ -5,13 +5,16 @@
 //! - `render`: forward and forward + backward of the rasterizer in f32 on the CT-like scenes of
 //!   [`crate::audit::bench`], for each Gaussian count and square detector size; prints median
 //!   times, Gaussian-pixel blends per second, and the same throughput of the naive per-pixel
-//!   reference measured on a smaller case in the same run, scaled per blend.
+//!   reference measured on a smaller case in the same run, scaled per blend; the SIMD path used
+//!   ([`crate::simd::Simd::active`]) and the arithmetic limit of the work: blends x the kernels'
+//!   flops per blend over the peak f32 rate measured in the same run
+//!   ([`crate::simd::peak_run`]), and the fraction of it reached.
 //!
 //! (A `train` kind, one full training iteration, belongs to the trainer.)
 
-use std::time::Instant;
-
 use anyhow::bail;
+
+use std::time::Instant;
 
 use crate::audit::bench::{process_cpu_seconds, time_naive, time_render, BOX_MM};
 use crate::render::composite;

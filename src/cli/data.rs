@@ -373,6 +373,11 @@ fn cap_voxels(vol: Volume<f32>, n: usize) -> anyhow::Result<Volume<f32>> {
 fn run_ct(a: CtArgs) -> anyhow::Result<()> {
     let ids = parse_label_ids(&a.crop_labels)?;
     let _ = options(&a.data, "", "")?;
+    let outs = store::output_files(&a.data.out);
+    crate::fsio::check_not_output("--volume", &a.volume, &outs)?;
+    if let Some(m) = &a.mask {
+        crate::fsio::check_not_output("--mask", m, &outs)?;
+    }
     eprintln!("loading {}", a.volume.display());
     let mut vol = crate::volume::load(&a.volume)?;
     vol.check_finite(&format!("{}", a.volume.display()))?;
@@ -412,6 +417,7 @@ fn run_ct(a: CtArgs) -> anyhow::Result<()> {
 
 fn run_us(a: UsArgs) -> anyhow::Result<()> {
     let _ = options(&a.data, "", "")?;
+    crate::fsio::check_not_output("--volume", &a.volume, &store::output_files(&a.data.out))?;
     eprintln!("loading {}", a.volume.display());
     let mut vol = crate::volume::load(&a.volume)?;
     vol.check_finite(&format!("{}", a.volume.display()))?;
@@ -430,6 +436,7 @@ fn run_us(a: UsArgs) -> anyhow::Result<()> {
 }
 
 fn run_import(a: ImportArgs) -> anyhow::Result<()> {
+    crate::fsio::check_not_output("--pickle", &a.pickle, &store::output_files(&a.out))?;
     eprintln!("reading {}", a.pickle.display());
     let ds = pickle::import(
         &a.pickle,

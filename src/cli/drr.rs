@@ -19,10 +19,10 @@ use ndarray::Array3;
 
 use crate::cli::progress::Progress;
 use crate::cli::render::Precision;
-use crate::dataset::store::write_png;
 use crate::drr::{self, Method};
 use crate::geometry::{self, ConeBeam, VoxelGrid};
 use crate::image2d::Image2d;
+use crate::preview::write_png;
 use crate::real::Real;
 use crate::volume::attenuation::HuConversion;
 use crate::volume::{self, Volume};
@@ -84,6 +84,8 @@ pub fn run(args: DrrArgs) -> anyhow::Result<()> {
     let geo = geometry::read_json(&args.geometry, Some(&grid)).context("--geometry")?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
+    let outs = [args.out.join("projections.npy"), args.out.join("drr.json")];
+    crate::fsio::check_not_output("--volume", &args.volume, &outs)?;
     match args.precision {
         Precision::F32 => project_and_write::<f32>(&args, vol, &geo, &angles_deg, method),
         Precision::F64 => project_and_write::<f64>(&args, vol.cast(), &geo, &angles_deg, method),
@@ -135,6 +137,8 @@ fn project_and_write<R: Real>(
         p.finish(&format!("{} views", angles.len()));
     }
     let (w, h) = (geo.n_detector[1], geo.n_detector[0]);
+    // Views of an earlier, longer angle list would look like part of this one.
+    crate::fsio::remove_matching(&args.out, "view_", ".png")?;
     let mut stack = Array3::<f32>::zeros((views.len(), h, w));
     for (k, img) in views.iter().enumerate() {
         let img32: Vec<f32> = img.data.iter().map(|v| v.f64() as f32).collect();
@@ -155,9 +159,7 @@ fn project_and_write<R: Real>(
         "units": "line integral: mm x volume value (after --hu); row 0 = top (+z)",
         "volume": vol.provenance,
     });
-    let json = args.out.join("drr.json");
-    std::fs::write(&json, serde_json::to_string_pretty(&meta)?)
-        .with_context(|| format!("writing {}", json.display()))?;
+    crate::fsio::write_json_atomic(&args.out.join("drr.json"), &meta)?;
     println!("{} views [{h} x {w}] -> {}", views.len(), npy.display());
     Ok(())
 }

@@ -9,6 +9,7 @@ pub mod progress;
 pub mod render;
 pub mod report;
 pub mod reproduce;
+pub mod signals;
 pub mod train;
 
 use clap::{Parser, Subcommand};

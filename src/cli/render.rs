@@ -18,6 +18,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use ndarray::Array2;
 
+use crate::gaussians::model::N_FEATURES;
+use crate::gaussians::ply::FeatureLayout;
 use crate::gaussians::{ply, Gaussians};
 use crate::geometry::{self, Camera};
 use crate::image2d::Image2d;
@@ -28,8 +30,12 @@ use crate::render::{self, ColorMode, RenderSettings};
 #[derive(Debug, clap::Args)]
 pub struct RenderArgs {
     /// Gaussians in the 3DGS PLY layout (pre-activation parameters, as 3DGS and X-Gaussian write).
+    #[arg(long, required_unless_present = "run", conflicts_with = "run")]
+    pub ply: Option<PathBuf>,
+    /// A run folder of `unispine train`: its saved model (`model.ply`, or the checkpoint of a
+    /// stopped run) with the render settings it records.
     #[arg(long)]
-    pub ply: PathBuf,
+    pub run: Option<PathBuf>,
     /// Dataset folder (from `unispine data`) whose geometry and view angle to use.
     #[arg(long, conflicts_with_all = ["geometry", "angle_deg"], requires = "view")]
     pub dataset: Option<PathBuf>,
@@ -45,14 +51,18 @@ pub struct RenderArgs {
     pub angle_deg: Option<f64>,
     /// Intensity model: `rirf-paper` (Eq. 2, sigmoid), `rirf-xgaussian` (X-Gaussian code,
     /// max(0, 0.5 + lambda . f)) or `sh` (view-dependent SH colour, the 3DGS baseline).
-    #[arg(long, value_enum, default_value = "rirf-paper")]
-    pub color: ColorArg,
-    /// Number of active features / SH coefficients (1, 4, 9 or 16).
-    #[arg(long, default_value_t = 16)]
-    pub active_features: usize,
-    /// Background value (added with the final transmittance).
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    pub background: f64,
+    /// Default: the model's recorded one (`comment unispine-render` in PLYs written by
+    /// `unispine train`), else `rirf-paper`. A value that contradicts the record is an error.
+    #[arg(long, value_enum)]
+    pub color: Option<ColorArg>,
+    /// Number of active features / SH coefficients (1, 4, 9 or 16). Default: the model's
+    /// recorded value, else 16.
+    #[arg(long)]
+    pub active_features: Option<usize>,
+    /// Background value (added with the final transmittance). Default: the model's recorded
+    /// value, else 0.
+    #[arg(long, allow_hyphen_values = true)]
+    pub background: Option<f64>,
     /// Upstream gradient W (npy, f32 or f64, shape [v, u]): also write the gradient of
     /// sum(W * image) with respect to every stored PLY field to `grads.npz`.
     #[arg(long)]
@@ -82,28 +92,7 @@ pub enum Precision {
 
 /// Run `unispine render`.
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
-    if ![1, 4, 9, 16].contains(&args.active_features) {
-        bail!(
-            "--active-features must be 1, 4, 9 or 16 (got {})",
-            args.active_features
-        );
-    }
-    if !args.background.is_finite() {
-        bail!(
-            "--background must be a finite number (got {})",
-            args.background
-        );
-    }
     let cam = camera(&args)?;
-    let settings = RenderSettings {
-        color: match args.color {
-            ColorArg::RirfPaper => ColorMode::RirfPaper,
-            ColorArg::RirfXgaussian => ColorMode::RirfXgaussian,
-            ColorArg::Sh => ColorMode::Sh,
-        },
-        active_features: args.active_features,
-        background: args.background,
-    };
     let weights = match &args.grad_weights {
         Some(p) => Some(read_weights(p, &cam)?),
         None => None,
@@ -111,9 +100,78 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
     match args.precision {
-        Precision::F32 => render_and_write::<f32>(&args, &cam, &settings, weights.as_ref()),
-        Precision::F64 => render_and_write::<f64>(&args, &cam, &settings, weights.as_ref()),
+        Precision::F32 => render_and_write::<f32>(&args, &cam, weights.as_ref()),
+        Precision::F64 => render_and_write::<f64>(&args, &cam, weights.as_ref()),
     }
+}
+
+/// The model (from `--ply` or `--run`), its source path, the settings it records, and the
+/// layout of its stored features (a run's model has the layout [`ply::write_ply`] writes).
+fn load_model<R: Real>(
+    args: &RenderArgs,
+) -> anyhow::Result<(Gaussians<R>, PathBuf, Option<RenderSettings>, FeatureLayout)> {
+    if let Some(run) = &args.run {
+        let m = crate::train::RunDir::open(run)?.read_model()?;
+        let layout = FeatureLayout {
+            channels: 3,
+            rest_per_channel: N_FEATURES - 1,
+        };
+        return Ok((m.gaussians.cast(), m.path, Some(m.render), layout));
+    }
+    let path = args.ply.clone().context("--ply or --run is required")?;
+    let (g, layout, comments) = ply::read_ply_full::<R>(&path)?;
+    let recorded = RenderSettings::from_ply_comments(&path, &comments)?;
+    Ok((g, path, recorded, layout))
+}
+
+/// The render settings: each flag given, else the model's record, else the defaults. An
+/// explicit `--color` that contradicts the record is an error (the image would be silently
+/// wrong).
+fn settings(
+    args: &RenderArgs,
+    model: &Path,
+    recorded: Option<&RenderSettings>,
+) -> anyhow::Result<RenderSettings> {
+    let color = args.color.map(|c| match c {
+        ColorArg::RirfPaper => ColorMode::RirfPaper,
+        ColorArg::RirfXgaussian => ColorMode::RirfXgaussian,
+        ColorArg::Sh => ColorMode::Sh,
+    });
+    if let (Some(c), Some(r)) = (color, recorded) {
+        if c != r.color {
+            bail!(
+                "--color {c:?} contradicts {}, which records the intensity model {:?} it was \
+                 trained with; omit --color",
+                model.display(),
+                r.color
+            );
+        }
+    }
+    let def = RenderSettings::default();
+    let s = RenderSettings {
+        color: color.or(recorded.map(|r| r.color)).unwrap_or(def.color),
+        active_features: args
+            .active_features
+            .or(recorded.map(|r| r.active_features))
+            .unwrap_or(def.active_features),
+        background: args
+            .background
+            .or(recorded.map(|r| r.background))
+            .unwrap_or(def.background),
+    };
+    if !crate::gaussians::rirf::valid_active(s.active_features) {
+        bail!(
+            "--active-features must be 1, 4, 9 or 16 (got {})",
+            s.active_features
+        );
+    }
+    if !s.background.is_finite() {
+        bail!(
+            "--background must be a finite number (got {})",
+            s.background
+        );
+    }
+    Ok(s)
 }
 
 /// The camera named by `--dataset/--view` or `--geometry/--angle-deg`.
@@ -176,17 +234,17 @@ fn read_weights(path: &Path, cam: &Camera) -> anyhow::Result<Image2d<f64>> {
 fn render_and_write<R: Real>(
     args: &RenderArgs,
     cam: &Camera,
-    settings: &RenderSettings,
     weights: Option<&Image2d<f64>>,
 ) -> anyhow::Result<()> {
-    let (g, layout): (Gaussians<R>, _) = ply::read_ply_with_layout(&args.ply)?;
+    let (g, model, recorded, layout) = load_model::<R>(args)?;
+    let settings = &settings(args, &model, recorded.as_ref())?;
     let (img, saved) = render::forward(&g, cam, settings)
-        .with_context(|| format!("rendering {}", args.ply.display()))?;
+        .with_context(|| format!("rendering {}", model.display()))?;
     let img32: Vec<f32> = img.data.iter().map(|v| v.f64() as f32).collect();
     let arr = Array2::from_shape_vec((img.height, img.width), img32.clone())?;
     let npy = args.out.join("image.npy");
     ndarray_npy::write_npy(&npy, &arr).with_context(|| format!("writing {}", npy.display()))?;
-    crate::dataset::store::write_png(
+    crate::preview::write_png(
         &args.out.join("image.png"),
         &Image2d::from_vec(img.width, img.height, img32),
     )?;

@@ -5,12 +5,13 @@
 //!
 //! Channels: 3DGS stores three colour channels. Our model has one intensity channel with 16
 //! features: writing repeats it in the three channels; reading averages the three (X-Gaussian
-//! keeps its channels identical, research/xgaussian_unispine.md §1). `f_rest` is channel-major
+//! keeps its channels identical and its renderer averages them, X-Gaussian
+//! `gaussian_renderer/__init__.py`). `f_rest` is channel-major
 //! as in 3DGS (`f_rest_{c * K + (k - 1)}` for channel c and coefficient k >= 1, K = number of
 //! rest coefficients per channel). Files with fewer `f_rest` fields (lower SH degree) load with
 //! the missing features at zero.
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 
 use ndarray::{Array1, Array2};
@@ -19,10 +20,28 @@ use crate::error::{Error, Result};
 use crate::gaussians::model::{Gaussians, N_FEATURES};
 use crate::real::Real;
 
-/// Write `g` to `path` in the 3DGS layout (binary little-endian float32).
+/// Write `g` to `path` in the 3DGS layout (binary little-endian float32), atomically.
 pub fn write_ply<R: Real>(path: &Path, g: &Gaussians<R>) -> Result<()> {
+    write_ply_with_comments(path, g, &[])
+}
+
+/// [`write_ply`] with `comment` lines in the header (one line each, no newline inside); other
+/// PLY readers ignore them, [`read_ply_with_comments`] returns them.
+pub fn write_ply_with_comments<R: Real>(
+    path: &Path,
+    g: &Gaussians<R>,
+    comments: &[String],
+) -> Result<()> {
+    crate::fsio::write_atomic(path, &ply_bytes(g, comments))
+}
+
+/// The bytes of [`write_ply_with_comments`].
+pub fn ply_bytes<R: Real>(g: &Gaussians<R>, comments: &[String]) -> Vec<u8> {
     let rest = N_FEATURES - 1;
     let mut header = String::from("ply\nformat binary_little_endian 1.0\n");
+    for c in comments {
+        header += &format!("comment {}\n", c.replace(['\n', '\r'], " "));
+    }
     header += &format!("element vertex {}\n", g.len());
     let mut names: Vec<String> = ["x", "y", "z", "nx", "ny", "nz"]
         .iter()
@@ -53,8 +72,7 @@ pub fn write_ply<R: Real>(path: &Path, g: &Gaussians<R>) -> Result<()> {
         g.log_scales[i].iter().for_each(|&v| put(v));
         g.quats[i].iter().for_each(|&v| put(v));
     }
-    let mut f = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
-    f.write_all(&buf).map_err(|e| Error::io(path, e))
+    buf
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -126,11 +144,22 @@ pub struct FeatureLayout {
 /// Read a 3DGS-layout PLY (binary little/big endian or ASCII). The three colour channels are
 /// averaged into our single intensity channel. Errors name the file and the missing or bad field.
 pub fn read_ply<R: Real>(path: &Path) -> Result<Gaussians<R>> {
-    read_ply_with_layout(path).map(|(g, _)| g)
+    read_ply_full(path).map(|(g, _, _)| g)
 }
 
 /// [`read_ply`], also returning the file's [`FeatureLayout`].
 pub fn read_ply_with_layout<R: Real>(path: &Path) -> Result<(Gaussians<R>, FeatureLayout)> {
+    read_ply_full(path).map(|(g, l, _)| (g, l))
+}
+
+/// [`read_ply`] and the header's `comment` lines (without the `comment ` prefix), in order.
+pub fn read_ply_with_comments<R: Real>(path: &Path) -> Result<(Gaussians<R>, Vec<String>)> {
+    read_ply_full(path).map(|(g, _, c)| (g, c))
+}
+
+/// [`read_ply`] with the file's [`FeatureLayout`] and header comments.
+pub fn read_ply_full<R: Real>(path: &Path) -> Result<(Gaussians<R>, FeatureLayout, Vec<String>)> {
+    let mut comments = Vec::new();
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let mut rd = BufReader::new(file);
     let mut line = String::new();
@@ -161,6 +190,10 @@ pub fn read_ply_with_layout<R: Real>(path: &Path) -> Result<(Gaussians<R>, Featu
     loop {
         read_line(&mut rd, &mut line)?;
         let t: Vec<&str> = line.split_whitespace().collect();
+        if let Some(c) = line.strip_prefix("comment ") {
+            comments.push(c.trim_end_matches(['\n', '\r']).to_string());
+            continue;
+        }
         match t.as_slice() {
             ["end_header"] => break,
             ["format", f, _] => format = Some(f.to_string()),
@@ -319,6 +352,7 @@ pub fn read_ply_with_layout<R: Real>(path: &Path) -> Result<(Gaussians<R>, Featu
             channels: ch,
             rest_per_channel: per_ch,
         },
+        comments,
     ))
 }
 

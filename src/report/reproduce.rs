@@ -111,9 +111,21 @@ pub fn psnr_vs_count(rows: &[Row], dataset: &str) -> String {
         title: format!("{dataset}: PSNR against Gaussian count"),
         x_label: "Gaussians at the end of training (log scale)".into(),
         y_label: "test PSNR (dB)".into(),
-        log_x: true,
         ..Default::default()
     };
+    // A log axis only when the counts span more than a decade.
+    let counts: Vec<f64> = rows
+        .iter()
+        .filter(|r| r.dataset == dataset)
+        .filter_map(|r| r.n_gaussians.map(|n| n as f64))
+        .collect();
+    let (lo, hi) = counts
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |a, &c| (a.0.min(c), a.1.max(c)));
+    p.log_x = lo > 0.0 && hi / lo > 10.0;
+    if !p.log_x {
+        p.x_label = "Gaussians at the end of training".into();
+    }
     for (ci, m) in ms.iter().enumerate() {
         let rs: Vec<&Row> = rows
             .iter()
