@@ -43,6 +43,9 @@ pub mod drr;
 /// Projection datasets: generation with the paper protocol, storage, pickle import.
 pub mod dataset;
 
+/// Classical baseline: FDK reconstruction with TIGRE's semantics.
+pub mod fdk;
+
 /// Radiative Gaussians (Eq. 1), RIRF (Eq. 2), ACUI initialisation, PLY.
 pub mod gaussians;
 
@@ -58,11 +61,18 @@ pub mod optim;
 /// Adaptive density control: clone, split, prune, opacity reset.
 pub mod densify;
 
-/// Evaluation: PSNR, SSIM, fps (also run inside the training loop).
-pub mod eval;
+/// Neural attenuation fields (NAF, IntraTomo, NeRF baselines): encoders, MLP, line-integral
+/// renderer, trainer; forward + backward.
+pub mod field;
 
 /// Method presets and the training loop.
 pub mod train;
+
+/// Evaluation: PSNR, SSIM, fps (also run inside the training loop).
+pub mod eval;
+
+/// Table 1's baselines behind `train --method`: scoring of predicted line integrals, run folder.
+pub mod baseline;
 
 /// Tables of finished runs.
 pub mod report;

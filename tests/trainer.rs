@@ -223,7 +223,10 @@ fn presets_parse_and_round_trip() {
     let unispine::cli::Command::Train(a) = cli.command else {
         panic!()
     };
-    let c = a.overrides.apply(a.method, a.iters).unwrap();
+    let c = a
+        .overrides
+        .apply(a.method.gaussians().unwrap(), a.iters)
+        .unwrap();
     assert_eq!(c.method, Method::Gs3d);
     assert_eq!(c.iterations, 50);
     assert_eq!(c.color, ColorMode::RirfPaper);

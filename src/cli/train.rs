@@ -12,6 +12,7 @@ use anyhow::{bail, Context};
 
 use super::progress::Progress;
 use super::signals;
+use crate::baseline::Baseline;
 use crate::error::Error;
 use crate::train::{self, Control, Event, Method, RunDir, TrainOverrides};
 
@@ -21,9 +22,10 @@ pub struct TrainArgs {
     /// Dataset folder written by `unispine data` (with `--resume`: default the run's own).
     #[arg(long, required_unless_present = "resume")]
     pub data: Option<PathBuf>,
-    /// Method preset.
-    #[arg(long, value_enum, default_value = "unispine")]
-    pub method: Method,
+    /// Method: a Gaussian preset (unispine, xgaussian, 3dgs, spwm-only) or a baseline (fdk,
+    /// naf, intratomo, nerf, naf-full, intratomo-full, nerf-full).
+    #[arg(long, default_value = "unispine", value_parser = parse_method)]
+    pub method: MethodArg,
     /// Training iterations (paper: 20000).
     #[arg(long)]
     pub iters: Option<usize>,
@@ -56,8 +58,12 @@ pub fn init_threads(threads: Option<usize>) -> anyhow::Result<()> {
 
 /// Run `unispine train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
+    let method = match args.method {
+        MethodArg::Gaussians(m) => m,
+        MethodArg::Baseline(b) => return run_baseline(b, &args),
+    };
     init_threads(args.threads)?;
-    if args.resume.is_some() && args.method != Method::Unispine {
+    if args.resume.is_some() && method != Method::Unispine {
         bail!("--method cannot be combined with --resume (the run's config.json is used)");
     }
     let (cfg, ds, out) = match &args.resume {
@@ -76,7 +82,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             let (Some(data), Some(out)) = (&args.data, &args.out) else {
                 bail!("--data and --out are required (or --resume RUN)");
             };
-            let mut cfg = args.overrides.apply(args.method, args.iters)?;
+            let mut cfg = args.overrides.apply(method, args.iters)?;
             // Absolute, so that `eval --run` and `--resume` work from any folder.
             let abs = data
                 .canonicalize()
@@ -186,6 +192,89 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         m.test_psnr.unwrap_or(f64::NAN),
         m.test_ssim.unwrap_or(f64::NAN),
         m.n_gaussians,
+        m.train_time_s,
+        m.render_fps.unwrap_or(f64::NAN)
+    );
+    println!("outputs: {}", out.display());
+    Ok(())
+}
+
+/// `--method`: a Gaussian preset or a baseline of [`crate::baseline`].
+#[derive(Clone, Copy, Debug)]
+pub enum MethodArg {
+    Gaussians(Method),
+    Baseline(Baseline),
+}
+
+impl MethodArg {
+    /// The Gaussian preset, when `--method` names one.
+    pub fn gaussians(self) -> Option<Method> {
+        match self {
+            MethodArg::Gaussians(m) => Some(m),
+            MethodArg::Baseline(_) => None,
+        }
+    }
+}
+
+fn parse_method(s: &str) -> Result<MethodArg, String> {
+    if let Some(b) = Baseline::parse(s) {
+        return Ok(MethodArg::Baseline(b));
+    }
+    <Method as clap::ValueEnum>::from_str(s, false)
+        .map(MethodArg::Gaussians)
+        .map_err(|_| {
+            let mut names: Vec<&str> = <Method as clap::ValueEnum>::value_variants()
+                .iter()
+                .map(|m| m.name())
+                .collect();
+            names.extend(Baseline::names());
+            format!("unknown method `{s}` (one of: {})", names.join(", "))
+        })
+}
+
+/// `unispine train --method BASELINE`: the baseline's own trainer, the same run folder
+/// (no resume; Ctrl-C stops a field run without evaluation).
+fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
+    let Some(data) = args.data.as_ref() else {
+        bail!("invalid `--data`: a baseline needs a dataset folder");
+    };
+    if args.resume.is_some() {
+        bail!("invalid `--resume`: baselines cannot be resumed");
+    }
+    let Some(out) = args.out.as_ref() else {
+        bail!("invalid `--out`: a baseline needs a run folder");
+    };
+    let ds = crate::dataset::store::load(data)?;
+    let stop = std::sync::atomic::AtomicBool::new(false);
+    eprintln!(
+        "running `{}` on {} -> {}",
+        b.name(),
+        data.display(),
+        out.display()
+    );
+    let mut bar: Option<Progress> = None;
+    let mut on_event = |e: &Event| {
+        if let Event::Progress {
+            total,
+            loss,
+            its_per_sec,
+            ..
+        } = e
+        {
+            let b = bar.get_or_insert_with(|| Progress::new("train", *total as u64));
+            b.inc(1, &format!("loss {loss:.3e} {its_per_sec:.1} it/s"));
+        }
+    };
+    let m = crate::baseline::run(b, &ds, Some(out), args.iters, &stop, &mut on_event);
+    if let Some(b) = bar.take() {
+        b.finish("");
+    }
+    let m = m?;
+    println!(
+        "{}: test PSNR {:.3} dB, SSIM {:.4}, train time {:.2} s, render {:.2} fps",
+        m.method,
+        m.test_psnr.unwrap_or(f64::NAN),
+        m.test_ssim.unwrap_or(f64::NAN),
         m.train_time_s,
         m.render_fps.unwrap_or(f64::NAN)
     );

@@ -35,6 +35,25 @@ impl ExponLr {
     }
 }
 
+/// `torch.optim.lr_scheduler.StepLR`: `lr0 * gamma^floor(epoch / step_size)`, the scheduler
+/// stepped once per epoch (SAX-NeRF / NAF `src/trainer.py`). Here in iterations: the learning
+/// rate of (1-based) iteration `it` is `lr0 * gamma^floor((it - 1) / step)`.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StepLr {
+    pub lr0: f64,
+    /// Step in iterations (`lrate_step` epochs x iterations per epoch).
+    pub step: usize,
+    pub gamma: f64,
+}
+
+impl StepLr {
+    /// Learning rate of iteration `it` (1-based).
+    pub fn at(&self, it: usize) -> f64 {
+        let k = it.saturating_sub(1) / self.step.max(1);
+        self.lr0 * self.gamma.powi(k.min(i32::MAX as usize) as i32)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -71,5 +90,20 @@ mod tests {
         let want = 0.01 + 0.99 * (0.25 * std::f64::consts::PI).sin();
         assert!((s.at(50) - want).abs() < 1e-15);
         assert!((s.at(100) - 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn step_lr_like_torch() {
+        // 50 iterations per epoch, step 2 epochs: iterations 1..=100 at lr0, 101..=200 at 0.1 lr0.
+        let s = StepLr {
+            lr0: 1e-3,
+            step: 100,
+            gamma: 0.1,
+        };
+        assert_eq!(s.at(1), 1e-3);
+        assert_eq!(s.at(100), 1e-3);
+        assert!((s.at(101) - 1e-4).abs() < 1e-18);
+        assert!((s.at(200) - 1e-4).abs() < 1e-18);
+        assert!((s.at(201) - 1e-5).abs() < 1e-19);
     }
 }

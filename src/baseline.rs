@@ -1,0 +1,465 @@
+//! Table 1's baselines behind `unispine train --method NAME`: the method names, the scoring of
+//! predicted line integrals on the test views, and the run folder (the same `metrics.json` as
+//! the Gaussian trainer's, so `unispine report` takes the rows as they are).
+//!
+//! Scoring: a baseline predicts raw line integrals (the dataset's units). Each test view's
+//! prediction is mapped with the same affine map that normalises its ground truth
+//! (`(p - min(gt)) / (max(gt) - min(gt))`, [`crate::eval::normalise_gt`]), clamped to [0, 1]
+//! like a Gaussian render, and scored with [`crate::eval::psnr`] and
+//! [`crate::loss::ssim::ssim`] against the normalised ground truth. This is PSNR / SSIM with the
+//! data range of each ground-truth view; it does not rescale the prediction by its own range
+//! (which would hide a scale error).
+//!
+//! Render speed: one warm-up render of the first test view, then three timed passes over every
+//! test view (forward only, no metrics); fps = views / seconds of the median pass, as
+//! [`crate::eval::render_fps`] does for the Gaussians.
+//!
+//! Run folder: `config.json` (method and settings), `metrics.json` ([`Metrics`]), `log.csv`
+//! (the columns of the Gaussian trainer's), the model (`model.npy` for FDK: f32 `[x, y, z]`
+//! volume, x fastest on disk, numpy reads it as an ordinary `[x, y, z]` array), and
+//! `previews/test_KK.png` (render | ground truth).
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+use ndarray::{Array3, ShapeBuilder};
+
+use crate::dataset::Dataset;
+use crate::drr::{self, Projector};
+use crate::error::{Error, Result};
+use crate::eval::{self, EvalResult, ViewMetrics};
+use crate::field::{Field, FieldConfig};
+use crate::image2d::Image2d;
+use crate::train::{EvalPoint, Event, Metrics};
+use crate::volume::Volume;
+
+/// A baseline method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Baseline {
+    /// FDK (TIGRE semantics) from the training views, re-projected at the test views.
+    Fdk,
+    /// A neural attenuation field preset of [`crate::field`] (`naf`, `naf-full`, ...).
+    Field(&'static str),
+}
+
+impl Baseline {
+    /// Every baseline name, in table order.
+    pub fn names() -> Vec<&'static str> {
+        let mut v = vec!["fdk"];
+        v.extend(crate::field::PRESETS);
+        v
+    }
+
+    /// The name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Baseline::Fdk => "fdk",
+            Baseline::Field(p) => p,
+        }
+    }
+
+    /// The baseline called `name`, if any.
+    pub fn parse(name: &str) -> Option<Baseline> {
+        if name == "fdk" {
+            return Some(Baseline::Fdk);
+        }
+        crate::field::PRESETS
+            .into_iter()
+            .find(|p| *p == name)
+            .map(Baseline::Field)
+    }
+}
+
+/// The projector that made the dataset's projections (from `manifest.projector`): re-projecting
+/// with the same operator charges no operator mismatch to the baseline.
+pub fn dataset_projector(ds: &Dataset) -> drr::Method {
+    if ds.manifest.projector.starts_with("trilinear") {
+        drr::Method::Trilinear
+    } else {
+        drr::Method::Siddon
+    }
+}
+
+/// Score predicted line integrals (one per test view, in test order) against the raw
+/// ground truth `gt` (see the module doc).
+pub fn score_line_integrals(pred: &[Image2d<f32>], gt: &[Image2d<f32>]) -> Result<EvalResult> {
+    if pred.len() != gt.len() || gt.is_empty() {
+        return Err(Error::invalid(
+            "test",
+            format!(
+                "{} predictions for {} test views (need one per view, at least one)",
+                pred.len(),
+                gt.len()
+            ),
+        ));
+    }
+    let mut views = Vec::with_capacity(gt.len());
+    for (k, (p, g)) in pred.iter().zip(gt).enumerate() {
+        let what = format!("test projection {k}");
+        if p.width != g.width || p.height != g.height {
+            return Err(Error::invalid(
+                format!("prediction {k}"),
+                format!(
+                    "{}x{} but the test view is {}x{}",
+                    p.height, p.width, g.height, g.width
+                ),
+            ));
+        }
+        crate::error::check_finite(&format!("prediction {k}"), &p.data)?;
+        let target = crate::dataset::targets::normalise_gt(g, &what)?;
+        let (lo, hi) = g
+            .data
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |a, &v| {
+                (a.0.min(v as f64), a.1.max(v as f64))
+            });
+        let r = hi - lo;
+        let mapped = Image2d::from_vec(
+            p.width,
+            p.height,
+            p.data
+                .iter()
+                .map(|&v| ((v as f64 - lo) / r) as f32)
+                .collect(),
+        );
+        let img = eval::clamp01(&mapped);
+        views.push(ViewMetrics {
+            psnr: eval::psnr(&img, &target),
+            ssim: crate::loss::ssim::ssim(&img, &target),
+        });
+    }
+    let n = views.len() as f64;
+    Ok(EvalResult {
+        psnr: views.iter().map(|v| v.psnr).sum::<f64>() / n,
+        ssim: views.iter().map(|v| v.ssim).sum::<f64>() / n,
+        views,
+    })
+}
+
+/// Frames per second of `render(view)` over `n` views (protocol in the module doc), and the
+/// seconds of the median pass.
+pub fn views_fps(n: usize, render: &dyn Fn(usize) -> Result<()>) -> Result<(f64, f64)> {
+    if n == 0 {
+        return Err(Error::invalid("test", "the dataset has no test view"));
+    }
+    render(0)?;
+    let mut times = Vec::with_capacity(3);
+    for _ in 0..3 {
+        let t = Instant::now();
+        for k in 0..n {
+            render(k)?;
+        }
+        times.push(t.elapsed().as_secs_f64());
+    }
+    times.sort_by(f64::total_cmp);
+    Ok((n as f64 / times[1].max(1e-12), times[1]))
+}
+
+/// Write a volume as an f32 `[x, y, z]` npy (Fortran order, so the bytes are our x-fastest
+/// layout).
+pub fn write_volume_npy(path: &Path, v: &Volume<f32>) -> Result<()> {
+    let arr = Array3::from_shape_vec((v.dims[0], v.dims[1], v.dims[2]).f(), v.data.clone())
+        .map_err(|e| Error::format(path, "shape", e.to_string()))?;
+    ndarray_npy::write_npy(path, &arr).map_err(|e| Error::format(path, "npy", e.to_string()))
+}
+
+/// Everything a baseline produced, before it is written.
+pub struct Outcome {
+    pub metrics: Metrics,
+    /// Settings for `config.json`.
+    pub config: serde_json::Value,
+    /// `log.csv` text.
+    pub log: String,
+    /// (test view, render in raw line integrals) for the previews.
+    pub test_renders: Vec<(usize, Image2d<f32>)>,
+}
+
+/// FDK from the training views, re-projected at the test views with the dataset's projector.
+pub fn run_fdk(ds: &Dataset) -> Result<(Outcome, Volume<f32>)> {
+    crate::dataset::store::check(ds)?;
+    let t0 = Instant::now();
+    let vol = crate::fdk::reconstruct(&ds.geometry, &ds.train.angles, &ds.train.projections)?;
+    let train_time = t0.elapsed().as_secs_f64();
+    let method = dataset_projector(ds);
+    let proj = Projector::new(&vol, &ds.geometry, method)?;
+    let te = Instant::now();
+    let test_renders: Vec<Image2d<f32>> = ds
+        .test
+        .angles
+        .iter()
+        .map(|&a| proj.view(a))
+        .collect::<Result<_>>()?;
+    let ev = score_line_integrals(&test_renders, &ds.test.projections)?;
+    let eval_time = te.elapsed().as_secs_f64();
+    let train_renders: Vec<Image2d<f32>> = ds
+        .train
+        .angles
+        .iter()
+        .map(|&a| proj.view(a))
+        .collect::<Result<_>>()?;
+    let train_fit = score_line_integrals(&train_renders, &ds.train.projections)?;
+    let (fps, _) = views_fps(ds.test.angles.len(), &|k| {
+        std::hint::black_box(proj.view(ds.test.angles[k])?);
+        Ok(())
+    })?;
+    let params = vol.data.len() as u64;
+    let metrics = Metrics {
+        method: Baseline::Fdk.name().into(),
+        iterations: 1,
+        completed: true,
+        evals: vec![EvalPoint {
+            iteration: 1,
+            psnr: ev.psnr,
+            ssim: ev.ssim,
+            n_gaussians: 0,
+        }],
+        test_psnr: Some(ev.psnr),
+        test_ssim: Some(ev.ssim),
+        train_time_s: train_time,
+        eval_time_s: eval_time,
+        render_fps: Some(fps),
+        render_fps_protocol: format!(
+            "test views, forward only ({} DRR of the reconstructed volume), f32, one warm-up \
+             render, median of 3 timed passes",
+            ds.manifest.projector
+        ),
+        n_gaussians: 0,
+        peak_memory_bytes: eval::peak_memory_bytes(),
+        extent: 0.0,
+        render: Default::default(),
+        threads: rayon::current_num_threads(),
+        model_bytes: Some(params * 4),
+    };
+    let config = serde_json::json!({
+        "method": "fdk",
+        "algorithm": "FDK, TIGRE Python semantics: cosine weighting, Ram-Lak (ramp_flat, scale (DSD/DSO)(2 pi/N)/(4 du)), voxel-driven backprojection weighted by 1/U^2, no Parker",
+        "train_views": ds.train.angles.len(),
+        "test_views": ds.test.angles.len(),
+        "grid": { "nVoxel": ds.geometry.n_voxel, "dVoxel": ds.geometry.d_voxel, "offOrigin": ds.geometry.off_origin },
+        "reprojection": ds.manifest.projector,
+    });
+    let log = format!(
+        "iteration,view,loss,data,ssim,psnr,n_gaussians,seconds\n1,0,0,0,{:.9e},{:.6},0,{:.3}\n",
+        train_fit.ssim, train_fit.psnr, train_time
+    );
+    Ok((
+        Outcome {
+            metrics,
+            config,
+            log,
+            test_renders: test_renders.into_iter().enumerate().collect(),
+        },
+        vol,
+    ))
+}
+
+/// Write the run folder `dir` of an outcome (the model is written by the caller).
+pub fn write_run(
+    dir: &Path,
+    rd: &crate::train::RunDir,
+    ds: &Dataset,
+    o: &Outcome,
+    previews: usize,
+) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let w = |name: &str, text: String| -> Result<()> {
+        let p = dir.join(name);
+        std::fs::write(&p, text).map_err(|e| Error::io(&p, e))
+    };
+    w(
+        "config.json",
+        serde_json::to_string_pretty(&o.config).expect("config serialises") + "\n",
+    )?;
+    w("log.csv", o.log.clone())?;
+    let pdir = dir.join("previews");
+    std::fs::create_dir_all(&pdir).map_err(|e| Error::io(&pdir, e))?;
+    let n = o.test_renders.len();
+    let k = previews.min(n);
+    for j in 0..k {
+        let (v, render) = &o.test_renders[j * n / k.max(1)];
+        let v = *v;
+        let gt = &ds.test.projections[v];
+        let (lo, hi) = gt
+            .data
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |a, &x| {
+                (a.0.min(x), a.1.max(x))
+            });
+        let map = |img: &Image2d<f32>| {
+            let r = (hi - lo).max(f32::MIN_POSITIVE);
+            Image2d::from_vec(
+                img.width,
+                img.height,
+                img.data.iter().map(|&x| (x - lo) / r).collect(),
+            )
+        };
+        rd.write_preview(&format!("test_{v:02}.png"), &map(render), &map(gt))?;
+    }
+    w(
+        "metrics.json",
+        serde_json::to_string_pretty(&o.metrics).expect("metrics serialise"),
+    )
+}
+
+/// Writes a run's model into its folder.
+type ModelWriter = Box<dyn Fn(&Path) -> Result<()>>;
+
+/// Run `baseline` on `ds`, writing the run folder `out` when given. `iters` replaces a field
+/// preset's iteration count (an error for FDK); `stop` ends a field run early (no evaluation);
+/// `on_event` receives [`Event::Progress`] after each field iteration.
+pub fn run(
+    baseline: Baseline,
+    ds: &Dataset,
+    out: Option<&Path>,
+    iters: Option<usize>,
+    stop: &AtomicBool,
+    on_event: &mut dyn FnMut(&Event),
+) -> Result<Metrics> {
+    let (o, write_model): (Outcome, ModelWriter) = match baseline {
+        Baseline::Fdk => {
+            if iters.is_some() {
+                return Err(Error::invalid(
+                    "--iters",
+                    "fdk is a single pass (no iterations)",
+                ));
+            }
+            let (o, vol) = run_fdk(ds)?;
+            (
+                o,
+                Box::new(move |dir: &Path| write_volume_npy(&dir.join("model.npy"), &vol)),
+            )
+        }
+        Baseline::Field(name) => {
+            let mut cfg = FieldConfig::preset(name, ds.train.angles.len())?;
+            if let Some(n) = iters {
+                if n == 0 {
+                    return Err(Error::invalid("--iters", "must be > 0"));
+                }
+                cfg.set_iterations(n);
+            }
+            let (o, field) = run_field(cfg, ds, stop, on_event)?;
+            (
+                o,
+                Box::new(move |dir: &Path| {
+                    crate::field::model::save(&dir.join("model.npz"), &field)
+                }),
+            )
+        }
+    };
+    if let Some(dir) = out {
+        let rd = crate::train::RunDir::create(dir)?;
+        write_model(dir)?;
+        write_run(dir, &rd, ds, &o, 4)?;
+    }
+    Ok(o.metrics)
+}
+
+/// Train a field preset, then render and score the test views (every `eval_stride`-th).
+pub fn run_field(
+    cfg: FieldConfig,
+    ds: &Dataset,
+    stop: &AtomicBool,
+    on_event: &mut dyn FnMut(&Event),
+) -> Result<(Outcome, Field<f32>)> {
+    let total = cfg.iterations;
+    let mut log = String::from("iteration,view,loss,data,ssim,psnr,n_gaussians,seconds\n");
+    let (mut win_t, mut win_it, mut its) = (Instant::now(), 0usize, 0.0f64);
+    let (tr, completed, train_time) = crate::field::train::train(cfg, ds, stop, &mut |s, t| {
+        // psnr column: 10 log10(1 / loss), the loss in (metres x normalised value)^2.
+        let psnr = -10.0 * s.loss.max(1e-30).log10();
+        let _ = writeln!(
+            log,
+            "{},{},{:.9e},{:.9e},0,{:.6},0,{:.3}",
+            s.iteration, s.view, s.loss, s.loss, psnr, t
+        );
+        win_it += 1;
+        let dt = win_t.elapsed().as_secs_f64();
+        if dt >= 1.0 || its == 0.0 {
+            its = win_it as f64 / dt.max(1e-9);
+            if dt >= 1.0 {
+                win_t = Instant::now();
+                win_it = 0;
+            }
+        }
+        on_event(&Event::Progress {
+            iteration: s.iteration,
+            total,
+            loss: s.loss,
+            psnr,
+            n_gaussians: 0,
+            its_per_sec: its,
+        });
+    })?;
+    let views = tr.eval_views();
+    let (mut ev, mut renders, mut fps, mut eval_time) = (None, Vec::new(), None, 0.0);
+    if completed {
+        let te = Instant::now();
+        renders = views.iter().map(|&k| (k, tr.render_test(k))).collect();
+        let preds: Vec<Image2d<f32>> = renders.iter().map(|r| r.1.clone()).collect();
+        let gts: Vec<Image2d<f32>> = views
+            .iter()
+            .map(|&k| ds.test.projections[k].clone())
+            .collect();
+        ev = Some(score_line_integrals(&preds, &gts)?);
+        eval_time = te.elapsed().as_secs_f64();
+        let nf = views.len().min(FIELD_FPS_VIEWS);
+        fps = Some(
+            views_fps(nf, &|j| {
+                std::hint::black_box(tr.render_test(views[j]));
+                Ok(())
+            })?
+            .0,
+        );
+    }
+    let cfg = tr.cfg.clone();
+    let params = tr.field.params.len() as u64;
+    let metrics = Metrics {
+        method: cfg.label(),
+        iterations: tr.iteration,
+        completed,
+        evals: ev
+            .iter()
+            .map(|e| EvalPoint {
+                iteration: tr.iteration,
+                psnr: e.psnr,
+                ssim: e.ssim,
+                n_gaussians: 0,
+            })
+            .collect(),
+        test_psnr: ev.as_ref().map(|e| e.psnr),
+        test_ssim: ev.as_ref().map(|e| e.ssim),
+        train_time_s: train_time,
+        eval_time_s: eval_time,
+        render_fps: fps,
+        render_fps_protocol: format!(
+            "the first {} evaluated test views rendered in full ({} samples per ray), f32, one \
+             warm-up render, median of 3 timed passes",
+            views.len().min(FIELD_FPS_VIEWS),
+            cfg.n_samples
+        ),
+        n_gaussians: 0,
+        peak_memory_bytes: eval::peak_memory_bytes(),
+        extent: 0.0,
+        render: Default::default(),
+        threads: rayon::current_num_threads(),
+        model_bytes: Some(params * 4),
+    };
+    let mut config = serde_json::to_value(&cfg).expect("config serialises");
+    config["method"] = serde_json::Value::String(cfg.label());
+    config["evaluated_test_views"] = serde_json::json!(views);
+    let field = tr.field;
+    Ok((
+        Outcome {
+            metrics,
+            config,
+            log,
+            test_renders: renders,
+        },
+        field,
+    ))
+}
+
+/// Test views timed for a field's fps (rendering a full view is slow on a CPU).
+pub const FIELD_FPS_VIEWS: usize = 5;

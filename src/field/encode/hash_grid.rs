@@ -1,0 +1,190 @@
+//! Multiresolution hash grid, torch-ngp's original variant as NAF uses it
+//! (Ruyi-Zha/naf_cbct `src/encoder/hashencoder/hashgrid.py`, `src/hashencoder.cu`):
+//! - input `x` in metres mapped to `(x + bound) / (2 bound)` in [0, 1];
+//! - level `l` has resolution `R_l = base * 2^l` (per-level scale 2), `scale_l = R_l - 1`,
+//!   `pos = x scale_l + 1/2`, corner `floor(pos)`, trilinear weights from `pos - floor(pos)`;
+//! - level `l` stores `min(T, (R_l + 1)^3)` entries of `F` features; it is dense
+//!   (`i + (R+1) (j + (R+1) k)`) when `(R_l + 1)^3 <= T`, else hashed with
+//!   `(i * 1) ^ (j * 19349663) ^ (k * 83492791)` (u32 wrapping) modulo `T`;
+//! - features initialised U(-1e-4, 1e-4); output `L * F` values, level-major.
+//!
+//! Backward: `dT_l[idx_c] += w_c g_l` per corner. The scatter is done level by level (levels in
+//! parallel, the samples of a level in order), so the gradient is bit-identical for any
+//! thread count and no atomics are needed.
+
+use rayon::prelude::*;
+
+use crate::real::Real;
+
+/// torch-ngp's hash primes.
+const PRIMES: [u32; 3] = [1, 19_349_663, 83_492_791];
+
+/// Layout of a hash grid.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HashGrid {
+    pub levels: usize,
+    pub features: usize,
+    pub log2_table: u32,
+    pub base: usize,
+    /// Half side of the cube the grid covers, metres.
+    pub bound: f64,
+    /// First entry of each level, plus the total at the end.
+    pub offsets: Vec<usize>,
+}
+
+impl HashGrid {
+    /// The layout (entries per level) of torch-ngp's `HashEncoder`.
+    pub fn new(levels: usize, features: usize, log2_table: u32, base: usize, bound: f64) -> Self {
+        let t = 1usize << log2_table;
+        let mut offsets = Vec::with_capacity(levels + 1);
+        let mut off = 0usize;
+        for l in 0..levels {
+            let r = base << l;
+            let dense = (r + 1).saturating_pow(3);
+            offsets.push(off);
+            off += dense.min(t);
+        }
+        offsets.push(off);
+        HashGrid {
+            levels,
+            features,
+            log2_table,
+            base,
+            bound,
+            offsets,
+        }
+    }
+
+    /// Output width `L * F`.
+    pub fn out_dim(&self) -> usize {
+        self.levels * self.features
+    }
+
+    /// Number of parameters (entries x features).
+    pub fn n_params(&self) -> usize {
+        self.offsets[self.levels] * self.features
+    }
+
+    /// The 8 corner entries (level-relative) and trilinear weights of point `x` at level `l`.
+    #[inline]
+    pub fn corners<R: Real>(&self, x: [R; 3], l: usize) -> ([usize; 8], [R; 8]) {
+        let bound = R::c(self.bound);
+        let r = (self.base << l) as u64;
+        let scale = R::c(r as f64 - 1.0);
+        let size = (self.offsets[l + 1] - self.offsets[l]) as u64;
+        let half = R::c(0.5);
+        let mut g = [0u32; 3];
+        let mut f = [R::zero(); 3];
+        for d in 0..3 {
+            let u = (x[d] + bound) / (bound + bound);
+            let p = u * scale + half;
+            let pf = p.floor();
+            g[d] = pf.to_u32().unwrap_or(0);
+            f[d] = p - pf;
+        }
+        let dense = (r + 1).pow(3) <= size;
+        let mut idx = [0usize; 8];
+        let mut w = [R::one(); 8];
+        for c in 0..8 {
+            let mut p = [0u32; 3];
+            for d in 0..3 {
+                if c & (1 << d) == 0 {
+                    w[c] *= R::one() - f[d];
+                    p[d] = g[d];
+                } else {
+                    w[c] *= f[d];
+                    p[d] = g[d] + 1;
+                }
+            }
+            let i = if dense {
+                p[0] as u64 + (r + 1) * (p[1] as u64 + (r + 1) * p[2] as u64)
+            } else {
+                (p[0].wrapping_mul(PRIMES[0])
+                    ^ p[1].wrapping_mul(PRIMES[1])
+                    ^ p[2].wrapping_mul(PRIMES[2])) as u64
+            };
+            idx[c] = (i % size) as usize;
+        }
+        (idx, w)
+    }
+
+    /// Encode one point (`out`: `L * F` values).
+    pub fn encode<R: Real>(&self, table: &[R], x: [R; 3], out: &mut [R]) {
+        let nf = self.features;
+        for l in 0..self.levels {
+            let (idx, w) = self.corners(x, l);
+            let base = self.offsets[l];
+            for ch in 0..nf {
+                let mut acc = R::zero();
+                for c in 0..8 {
+                    acc += w[c] * table[(base + idx[c]) * nf + ch];
+                }
+                out[l * nf + ch] = acc;
+            }
+        }
+    }
+
+    /// Accumulate the table gradient of `sum g . encode(x)` over the points `xs`, with
+    /// `g_out[n * g_stride + g_off ..]` the gradient of point `n`'s encoding.
+    pub fn backward<R: Real>(
+        &self,
+        xs: &[[R; 3]],
+        g_out: &[R],
+        g_stride: usize,
+        g_off: usize,
+        grad: &mut [R],
+    ) {
+        let nf = self.features;
+        let mut slices: Vec<&mut [R]> = Vec::with_capacity(self.levels);
+        let mut rest = grad;
+        for l in 0..self.levels {
+            let len = (self.offsets[l + 1] - self.offsets[l]) * nf;
+            let (a, b) = rest.split_at_mut(len);
+            slices.push(a);
+            rest = b;
+        }
+        slices.into_par_iter().enumerate().for_each(|(l, gl)| {
+            for (n, &x) in xs.iter().enumerate() {
+                let (idx, w) = self.corners(x, l);
+                let g = &g_out[n * g_stride + g_off + l * nf..][..nf];
+                for c in 0..8 {
+                    for ch in 0..nf {
+                        gl[idx[c] * nf + ch] += w[c] * g[ch];
+                    }
+                }
+            }
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn naf_full_layout() {
+        // 16 levels, T = 2^19, base 16: levels 0-2 dense (4913, 35937, 274625 entries),
+        // levels 3-15 hashed; 7,131,219 entries in total (14.26 M parameters with F = 2).
+        let g = HashGrid::new(16, 2, 19, 16, 0.3);
+        assert_eq!(g.offsets[1], 4913);
+        assert_eq!(g.offsets[2] - g.offsets[1], 35937);
+        assert_eq!(g.offsets[3] - g.offsets[2], 274_625);
+        assert_eq!(g.offsets[4] - g.offsets[3], 1 << 19);
+        assert_eq!(g.offsets[16], 7_131_219);
+        assert_eq!(g.n_params(), 14_262_438);
+    }
+
+    #[test]
+    fn corners_dense_and_hashed() {
+        let g = HashGrid::new(4, 2, 12, 4, 0.5);
+        // Level 0: R = 4, scale 3, dense (125 <= 4096). x = -0.5 maps to u = 0: pos 0.5.
+        let (idx, w) = g.corners([-0.5f64, -0.5, -0.5], 0);
+        assert_eq!(idx[0], 0);
+        assert_eq!(idx[7], 1 + 5 + 25);
+        assert!(w.iter().all(|&v| (v - 0.125).abs() < 1e-15));
+        // Level 3: R = 32, 33^3 > 4096: hashed. x = +0.5 -> u = 1 -> pos 31.5, corner 31.
+        let (idx, _) = g.corners([0.5f64, 0.5, 0.5], 3);
+        let h = 31u32 ^ 31u32.wrapping_mul(19_349_663) ^ 31u32.wrapping_mul(83_492_791);
+        assert_eq!(idx[0], (h as usize) % 4096);
+    }
+}

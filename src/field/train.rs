@@ -1,0 +1,384 @@
+//! The field trainer (SAX-NeRF / NAF `src/trainer.py`, `src/dataset/tigre.py`):
+//! - iteration `it` (1-based) uses training projection `(it - 1) mod N` (DataLoader with
+//!   batch 1, no shuffle: views in angular order);
+//! - `n_rays` pixels drawn without replacement among the pixels with projection > 0 (all of
+//!   them when fewer), seeded per iteration;
+//! - target: the projection in metres of the [0, 1]-normalised volume, i.e. our line integral
+//!   (mm x value) / (1000 x the dataset volume's maximum value; 1 when the dataset has no
+//!   volume);
+//! - loss: mean over the rays of `(acc - target)^2`; Adam (PyTorch) with StepLR;
+//! - a non-finite loss, gradient or parameter stops the run with [`Error::Diverged`] naming
+//!   the iteration.
+//!
+//! Work split: blocks of [`RAYS_PER_BLOCK`] rays run in parallel (samples, encoding, MLP
+//! forward and backward, per-block MLP gradient); the blocks' gradients and losses are added in
+//! block order, then the encoder gradient is scattered level by level from the saved
+//! per-sample encoding gradients. Bit-identical for any thread count.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+
+use super::adam::FlatAdam;
+use super::render::{self, Ray, MM};
+use super::{Field, FieldConfig};
+use crate::dataset::Dataset;
+use crate::error::{Error, Result};
+use crate::geometry::ConeBeam;
+use crate::image2d::Image2d;
+use crate::optim::schedule::StepLr;
+use crate::real::Real;
+
+/// Rays per parallel block.
+pub const RAYS_PER_BLOCK: usize = 8;
+
+/// Stream ids of the seeded generators.
+const RNG_PIXELS: u64 = 1;
+const RNG_TRAIN_JITTER: u64 = 2;
+const RNG_EVAL_JITTER: u64 = 3;
+
+/// Forward + backward of a batch of rays with targets. Returns the loss (mean squared error
+/// over the rays) and the gradient of every parameter.
+pub fn loss_and_grad<R: Real>(
+    field: &Field<R>,
+    rays: &[Ray],
+    targets: &[R],
+    near_far: (f64, f64),
+    n_samples: usize,
+    bound: f64,
+    jitter: &(dyn Fn(usize) -> ChaCha8Rng + Sync),
+) -> (f64, Vec<R>) {
+    let ne = field.n_encoder_params();
+    let nm = field.mlp.n_params;
+    let ed = field.encoder.out_dim();
+    let b = R::c(rays.len() as f64);
+    let want_gx = ne > 0;
+    struct Block<R> {
+        loss: f64,
+        g_mlp: Vec<R>,
+        pts: Vec<[R; 3]>,
+        g_x: Vec<R>,
+    }
+    let blocks: Vec<Block<R>> = rays
+        .par_chunks(RAYS_PER_BLOCK)
+        .enumerate()
+        .map(|(bi, chunk)| {
+            let mut pts = Vec::with_capacity(chunk.len() * n_samples);
+            let mut delta = Vec::with_capacity(chunk.len() * n_samples);
+            for (j, ray) in chunk.iter().enumerate() {
+                let mut rng = jitter(bi * RAYS_PER_BLOCK + j);
+                let t = render::stratified(near_far.0, near_far.1, n_samples, &mut rng);
+                render::samples(ray, &t, bound, &mut pts, &mut delta);
+            }
+            let n = pts.len();
+            let enc = field.encode(&pts);
+            let mp = &field.params[ne..];
+            let (mu, cache) = field.mlp.forward(mp, &enc, n, true);
+            let mut g_mu = vec![R::zero(); n];
+            let mut loss = 0.0;
+            for j in 0..chunk.len() {
+                let s = j * n_samples..(j + 1) * n_samples;
+                let acc = render::line_integral(&mu[s.clone()], &delta[s.clone()]);
+                let r = acc - targets[bi * RAYS_PER_BLOCK + j];
+                loss += r.f64() * r.f64();
+                let g_acc = R::c(2.0) * r / b;
+                for i in s {
+                    g_mu[i] = g_acc * delta[i];
+                }
+            }
+            let mut g_mlp = vec![R::zero(); nm];
+            let mut g_x = if want_gx {
+                vec![R::zero(); n * ed]
+            } else {
+                Vec::new()
+            };
+            field.mlp.backward(
+                mp,
+                &cache,
+                &g_mu,
+                n,
+                &mut g_mlp,
+                want_gx.then_some(&mut g_x[..]),
+            );
+            Block {
+                loss,
+                g_mlp,
+                pts,
+                g_x,
+            }
+        })
+        .collect();
+    let mut grad = vec![R::zero(); ne + nm];
+    let mut loss = 0.0;
+    for bl in &blocks {
+        loss += bl.loss;
+        for (a, &g) in grad[ne..].iter_mut().zip(&bl.g_mlp) {
+            *a += g;
+        }
+    }
+    if want_gx {
+        let mut pts = Vec::new();
+        let mut gx = Vec::new();
+        for bl in blocks {
+            pts.extend(bl.pts);
+            gx.extend(bl.g_x);
+        }
+        field.encoder.backward(&pts, &gx, ed, 0, &mut grad[..ne]);
+    }
+    (loss / rays.len() as f64, grad)
+}
+
+/// Line integrals (metres x normalised value) along `rays`, jittered by `jitter(ray index)`.
+pub fn render_rays<R: Real>(
+    field: &Field<R>,
+    rays: &[Ray],
+    near_far: (f64, f64),
+    n_samples: usize,
+    bound: f64,
+    jitter: &(dyn Fn(usize) -> ChaCha8Rng + Sync),
+) -> Vec<R> {
+    rays.par_chunks(RAYS_PER_BLOCK)
+        .enumerate()
+        .flat_map_iter(|(bi, chunk)| {
+            let mut pts = Vec::with_capacity(chunk.len() * n_samples);
+            let mut delta = Vec::with_capacity(chunk.len() * n_samples);
+            for (j, ray) in chunk.iter().enumerate() {
+                let mut rng = jitter(bi * RAYS_PER_BLOCK + j);
+                let t = render::stratified(near_far.0, near_far.1, n_samples, &mut rng);
+                render::samples(ray, &t, bound, &mut pts, &mut delta);
+            }
+            let mu = field.density(&pts);
+            (0..chunk.len())
+                .map(|j| {
+                    let s = j * n_samples..(j + 1) * n_samples;
+                    render::line_integral(&mu[s.clone()], &delta[s])
+                })
+                .collect::<Vec<R>>()
+        })
+        .collect()
+}
+
+/// The scale from a line integral in metres of the normalised volume to the dataset's units:
+/// `1000 x` the volume's maximum (1000 when the dataset has no volume or its maximum is not
+/// positive).
+pub fn unit_scale(ds: &Dataset) -> f64 {
+    let vmax = ds
+        .volume
+        .as_ref()
+        .map(|v| v.data.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b)) as f64)
+        .filter(|m| m.is_finite() && *m > 0.0)
+        .unwrap_or(1.0);
+    MM * vmax
+}
+
+/// Render a whole view in the dataset's units.
+pub fn render_view(
+    field: &Field<f32>,
+    cfg: &FieldConfig,
+    geo: &ConeBeam,
+    angle: f64,
+    view_id: u64,
+    scale: f64,
+) -> Image2d<f32> {
+    let cam = geo.camera(angle);
+    let (w, h) = (cam.width, cam.height);
+    let rays: Vec<Ray> = (0..h)
+        .flat_map(|r| (0..w).map(move |c| (c, r)))
+        .map(|(c, r)| render::pixel_ray(&cam, c, r))
+        .collect();
+    let seed = cfg.seed;
+    let acc = render_rays(
+        field,
+        &rays,
+        render::near_far(geo),
+        cfg.n_samples,
+        cfg.bound,
+        &|i| render::ray_rng(seed, RNG_EVAL_JITTER, view_id, i as u64),
+    );
+    Image2d::from_vec(
+        w,
+        h,
+        acc.iter().map(|&a| (a as f64 * scale) as f32).collect(),
+    )
+}
+
+/// Per-iteration figures.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FieldStep {
+    pub iteration: usize,
+    pub view: usize,
+    pub loss: f64,
+    pub lr: f64,
+}
+
+/// The training state.
+pub struct FieldTrainer<'a> {
+    pub cfg: FieldConfig,
+    pub ds: &'a Dataset,
+    pub field: Field<f32>,
+    pub adam: FlatAdam<f32>,
+    pub sched: StepLr,
+    pub iteration: usize,
+    /// Per training view: indices of the pixels with projection > 0.
+    valid: Vec<Vec<u32>>,
+    scale: f64,
+    near_far: (f64, f64),
+}
+
+impl<'a> FieldTrainer<'a> {
+    /// Set up a run (validates the settings and the dataset).
+    pub fn new(cfg: FieldConfig, ds: &'a Dataset) -> Result<Self> {
+        cfg.validate()?;
+        crate::dataset::store::check(ds)?;
+        if ds.geometry.mode != crate::geometry::Mode::Cone {
+            return Err(Error::invalid(
+                "mode",
+                "the field trainer needs a cone-beam geometry (NAF rays)",
+            ));
+        }
+        let field = Field::<f32>::new(&cfg)?;
+        let valid: Vec<Vec<u32>> = ds
+            .train
+            .projections
+            .iter()
+            .map(|p| {
+                (0..p.data.len() as u32)
+                    .filter(|&i| p.data[i as usize] > 0.0)
+                    .collect()
+            })
+            .collect();
+        if let Some(k) = valid.iter().position(|v| v.is_empty()) {
+            return Err(Error::invalid(
+                format!("train projection {k}"),
+                "no pixel with a positive value: nothing to sample rays from",
+            ));
+        }
+        Ok(FieldTrainer {
+            adam: FlatAdam::new(field.params.len()),
+            sched: StepLr {
+                lr0: cfg.lr,
+                step: cfg.lr_step,
+                gamma: cfg.lr_gamma,
+            },
+            scale: unit_scale(ds),
+            near_far: render::near_far(&ds.geometry),
+            cfg,
+            ds,
+            field,
+            iteration: 0,
+            valid,
+        })
+    }
+
+    /// The rays and targets of iteration `it`.
+    pub fn batch(&self, it: usize) -> (usize, Vec<Ray>, Vec<f32>) {
+        let nv = self.ds.train.angles.len();
+        let view = (it - 1) % nv;
+        let valid = &self.valid[view];
+        let k = self.cfg.n_rays.min(valid.len());
+        let mut rng = ChaCha8Rng::seed_from_u64(self.cfg.seed ^ 0x0a1f_0000_0000_0000);
+        rng.set_stream(RNG_PIXELS.wrapping_mul(1 << 40) ^ it as u64);
+        // Partial Fisher-Yates: the first k of a seeded permutation.
+        let mut idx = valid.clone();
+        for i in 0..k {
+            let j = rng.random_range(i..idx.len());
+            idx.swap(i, j);
+        }
+        let cam = self.ds.train_camera(view);
+        let proj = &self.ds.train.projections[view];
+        let w = proj.width;
+        let rays = idx[..k]
+            .iter()
+            .map(|&p| render::pixel_ray(&cam, p as usize % w, p as usize / w))
+            .collect();
+        let targets = idx[..k]
+            .iter()
+            .map(|&p| (proj.data[p as usize] as f64 / self.scale) as f32)
+            .collect();
+        (view, rays, targets)
+    }
+
+    /// Run iteration `self.iteration + 1`.
+    pub fn step(&mut self) -> Result<FieldStep> {
+        let it = self.iteration + 1;
+        let (view, rays, targets) = self.batch(it);
+        let seed = self.cfg.seed;
+        let (loss, grad) = loss_and_grad(
+            &self.field,
+            &rays,
+            &targets,
+            self.near_far,
+            self.cfg.n_samples,
+            self.cfg.bound,
+            &|i| render::ray_rng(seed, RNG_TRAIN_JITTER, it as u64, i as u64),
+        );
+        let diverged = |what: String| Error::Diverged {
+            iteration: it,
+            what,
+        };
+        if !loss.is_finite() {
+            return Err(diverged(format!("loss is {loss} on training view {view}")));
+        }
+        if let Some(i) = grad.iter().position(|g| !g.is_finite()) {
+            return Err(diverged(format!(
+                "gradient of parameter {i} is {} on training view {view}",
+                grad[i]
+            )));
+        }
+        let lr = self.sched.at(it);
+        self.adam.update(&mut self.field.params, &grad, lr);
+        if let Some(i) = self.field.params.iter().position(|p| !p.is_finite()) {
+            return Err(diverged(format!("parameter {i} became non-finite")));
+        }
+        self.iteration = it;
+        Ok(FieldStep {
+            iteration: it,
+            view,
+            loss,
+            lr,
+        })
+    }
+
+    /// Render test view `k` in the dataset's units.
+    pub fn render_test(&self, k: usize) -> Image2d<f32> {
+        render_view(
+            &self.field,
+            &self.cfg,
+            &self.ds.geometry,
+            self.ds.test.angles[k],
+            k as u64,
+            self.scale,
+        )
+    }
+
+    /// The test views evaluated (every `eval_stride`-th).
+    pub fn eval_views(&self) -> Vec<usize> {
+        (0..self.ds.test.angles.len())
+            .step_by(self.cfg.eval_stride)
+            .collect()
+    }
+}
+
+/// Train to the end (or until `stop`), calling `on_step` after each iteration.
+pub fn train<'a>(
+    cfg: FieldConfig,
+    ds: &'a Dataset,
+    stop: &AtomicBool,
+    on_step: &mut dyn FnMut(&FieldStep, f64),
+) -> Result<(FieldTrainer<'a>, bool, f64)> {
+    let mut tr = FieldTrainer::new(cfg, ds)?;
+    let t0 = Instant::now();
+    let mut completed = true;
+    while tr.iteration < tr.cfg.iterations {
+        if stop.load(Ordering::SeqCst) {
+            completed = false;
+            break;
+        }
+        let s = tr.step()?;
+        on_step(&s, t0.elapsed().as_secs_f64());
+    }
+    Ok((tr, completed, t0.elapsed().as_secs_f64()))
+}
