@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use unispine::drr::{self, Method, Projector};
-use unispine::geometry::{ConeBeam, Mode};
+use unispine::geometry::ConeBeam;
 use unispine::volume::Volume;
 
 fn ct_path() -> PathBuf {
@@ -48,18 +48,7 @@ fn load_ct(path: &Path) -> Volume<f32> {
 }
 
 fn geometry(v: &Volume<f32>) -> ConeBeam {
-    ConeBeam {
-        dsd: 1500.0,
-        dso: 1000.0,
-        n_detector: [256, 256],
-        d_detector: [665.0 / 256.0; 2],
-        n_voxel: v.dims,
-        d_voxel: v.spacing,
-        off_origin: [0.0; 3],
-        off_detector: [0.0; 2],
-        mode: Mode::Cone,
-        accuracy: 0.5,
-    }
+    ConeBeam::centred([256, 256], [665.0 / 256.0; 2], v.dims, v.spacing)
 }
 
 /// Peak resident memory (VmHWM) in MiB, and a way to reset it (Linux).

@@ -10,24 +10,13 @@ use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use unispine::dataset::{Dataset, Manifest, Split};
-use unispine::geometry::{ConeBeam, Mode};
+use unispine::geometry::ConeBeam;
 use unispine::image2d::Image2d;
 use unispine::train::{Method, TrainConfig, Trainer};
 
 fn dataset() -> Dataset {
     let n = 256;
-    let geo = ConeBeam {
-        dsd: 1500.0,
-        dso: 1000.0,
-        n_detector: [n, n],
-        d_detector: [0.85, 0.85],
-        n_voxel: [296, 296, 296],
-        d_voxel: [120.0 / 296.0; 3],
-        off_origin: [0.0; 3],
-        off_detector: [0.0; 2],
-        mode: Mode::Cone,
-        accuracy: 0.5,
-    };
+    let geo = ConeBeam::centred([n, n], [0.85, 0.85], [296, 296, 296], [120.0 / 296.0; 3]);
     let img = |k: usize| {
         let mut d = vec![0.0f32; n * n];
         for r in 0..n {

@@ -6,7 +6,9 @@
 //! changes them only through one index map ([`TrainState::remap`]), so no array can fall out of
 //! step with another.
 //!
-//! Upstream behaviour reproduced (research/xgaussian_unispine.md section 4):
+//! Upstream behaviour reproduced (3DGS `graphdeco-inria/gaussian-splatting`
+//! `scene/gaussian_model.py` `densify_and_prune`, `train.py`, as X-Gaussian and UniSpine-GS copy
+//! them):
 //! - statistics while `iteration < densify_until`: for Gaussians visible in the view (radius
 //!   > 0), `grad_accum += |dL/dmean2d (NDC)|`, `denom += 1`, `max_radius = max(max_radius, r)`;
 //! - at `iteration > densify_from` and `iteration % interval == 0`: grad = accum / denom (0 when

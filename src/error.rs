@@ -1,5 +1,5 @@
 //! The library's error type. Every variant names the file and/or field that is wrong, so the
-//! binary can report it as is (DESIGN.md principle 5).
+//! binary can report it as is.
 
 use std::path::PathBuf;
 

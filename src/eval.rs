@@ -1,9 +1,7 @@
 //! Evaluation as the UniSpine-GS code does it (`train.py` `training_report`,
 //! `scene/cameras.py`, `utils/image_utils.py`, `utils/loss_utils.py`):
-//! - ground truth: each projection min-max normalised to [0, 1] on its own ([`normalise_gt`]);
-//!   upstream first clamps the raw projection to [0, 1], a no-op for its line integrals in
-//!   metres (0 to about 0.5) but not for ours in mm, so we normalise the raw values (the same
-//!   image whenever upstream's clamp is inactive);
+//! - ground truth: each projection min-max normalised to [0, 1] on its own
+//!   ([`crate::dataset::targets`]);
 //! - render clamped to [0, 1];
 //! - PSNR = 20 log10(1 / sqrt(MSE)) (data range 1), SSIM with the 11x11 Gaussian window
 //!   (sigma 1.5, zero padding, C1 = 0.01^2, C2 = 0.03^2) of [`crate::loss::ssim`], each averaged
@@ -26,33 +24,6 @@ use crate::error::{Error, Result};
 use crate::gaussians::Gaussians;
 use crate::image2d::Image2d;
 use crate::render::{self, RenderSettings};
-
-/// Min-max normalise one projection to [0, 1] (computed in f64, stored in f32). A constant or
-/// non-finite projection is an error naming `what`.
-pub fn normalise_gt(img: &Image2d<f32>, what: &str) -> Result<Image2d<f32>> {
-    crate::error::check_finite(what, &img.data)?;
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for &v in &img.data {
-        lo = lo.min(v as f64);
-        hi = hi.max(v as f64);
-    }
-    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
-        return Err(Error::invalid(
-            what,
-            format!("constant projection (min = max = {lo}); it cannot be min-max normalised"),
-        ));
-    }
-    let r = hi - lo;
-    Ok(Image2d {
-        width: img.width,
-        height: img.height,
-        data: img
-            .data
-            .iter()
-            .map(|&v| ((v as f64 - lo) / r) as f32)
-            .collect(),
-    })
-}
 
 /// The image clamped to [0, 1].
 pub fn clamp01(img: &Image2d<f32>) -> Image2d<f32> {
@@ -88,16 +59,6 @@ pub struct EvalResult {
     pub ssim: f64,
     /// Per view, in test order.
     pub views: Vec<ViewMetrics>,
-}
-
-/// The normalised ground truth of every test view.
-pub fn test_targets(ds: &Dataset) -> Result<Vec<Image2d<f32>>> {
-    ds.test
-        .projections
-        .iter()
-        .enumerate()
-        .map(|(k, p)| normalise_gt(p, &format!("test projection {k}")))
-        .collect()
 }
 
 /// Render `g` at every test view and compare with the normalised ground truth.
@@ -166,18 +127,8 @@ mod tests {
     use super::*;
 
     #[test]
-    fn normalisation_and_psnr() {
-        let img = Image2d::from_vec(2, 2, vec![2.0f32, 4.0, 3.0, 6.0]);
-        let n = normalise_gt(&img, "x").unwrap();
-        assert_eq!(n.data, vec![0.0, 0.5, 0.25, 1.0]);
-        let c = Image2d::from_vec(2, 2, vec![5.0f32; 4]);
-        let e = normalise_gt(&c, "test projection 3")
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("test projection 3"), "{e}");
-        let mut nan = img.clone();
-        nan.data[1] = f32::NAN;
-        assert!(normalise_gt(&nan, "t").is_err());
+    fn psnr_and_clamp() {
+        let n = Image2d::from_vec(2, 2, vec![0.0f32, 0.5, 0.25, 1.0]);
         // MSE = (0.1^2 * 4) / 4 = 0.01 -> 20 dB
         let a = Image2d::from_vec(2, 2, vec![0.1f32, 0.6, 0.35, 1.1]);
         let p = psnr(&a, &n);

@@ -1,7 +1,8 @@
 //! Cone-beam (and parallel-beam) scanner geometry with the TIGRE / NAF field names, and the
 //! per-angle pinhole [`Camera`] used by both the DRR ray-marcher and the Gaussian rasterizer.
 //!
-//! Conventions (research/xgaussian_unispine.md §2, DESIGN.md):
+//! Conventions (NAF `Ruyi-Zha/naf_cbct` `src/dataset/tigre.py`: `angle2pose`, `get_rays`; the
+//! same pose in X-Gaussian `caiyuanhao1998/X-Gaussian` `scene/dataset_readers.py`):
 //! - Lengths in millimetres, angles in radians.
 //! - Source on the circle of radius `DSO` in the z = 0 plane at angle θ, rotating about world +z:
 //!   camera centre c = (DSO cos θ, DSO sin θ, 0).
@@ -17,6 +18,8 @@
 //! - Volume: `nVoxel`, `dVoxel`, `offOrigin` are `[x, y, z]`; voxel (i, j, k) has its centre at
 //!   (-sX/2 + (i + 1/2) dX, ...) + offOrigin with sX = nX dX (TIGRE / NAF).
 //! - Parallel beam: rays along camera z through the same detector coordinates (no divergence).
+
+use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
@@ -72,7 +75,36 @@ pub struct ConeBeam {
     pub accuracy: f64,
 }
 
+/// Source-to-detector distance of every SAX-NeRF / UniSpine-GS data config, mm
+/// (SAX-NeRF `dataGenerator/raw_data/*/config.yml`: `DSD: 1500`).
+pub const DSD_MM: f64 = 1500.0;
+/// Source-to-origin distance of every SAX-NeRF / UniSpine-GS data config, mm (`DSO: 1000`).
+pub const DSO_MM: f64 = 1000.0;
+
 impl ConeBeam {
+    /// A centred cone beam at the protocol distances ([`DSD_MM`], [`DSO_MM`]): no volume or
+    /// detector offset, trilinear step 0.5 voxel. Other fields by struct update, e.g.
+    /// `ConeBeam { mode: Mode::Parallel, ..ConeBeam::centred(..) }`.
+    pub fn centred(
+        n_detector: [usize; 2],
+        d_detector: [f64; 2],
+        n_voxel: [usize; 3],
+        d_voxel: [f64; 3],
+    ) -> Self {
+        ConeBeam {
+            dsd: DSD_MM,
+            dso: DSO_MM,
+            n_detector,
+            d_detector,
+            n_voxel,
+            d_voxel,
+            off_origin: [0.0; 3],
+            off_detector: [0.0; 2],
+            mode: Mode::Cone,
+            accuracy: default_accuracy(),
+        }
+    }
+
     /// Check every field for sign and finiteness; the error names the field.
     pub fn validate(&self) -> Result<()> {
         let pos = |name: &str, v: f64| -> Result<()> {
@@ -172,6 +204,52 @@ impl ConeBeam {
     pub fn camera(&self, angle: f64) -> Camera {
         Camera::new(self, angle)
     }
+}
+
+/// A volume's voxel grid, for the fields a geometry file may leave out.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VoxelGrid {
+    /// `nVoxel` `[x, y, z]`.
+    pub n_voxel: [usize; 3],
+    /// `dVoxel` `[x, y, z]`, mm.
+    pub d_voxel: [f64; 3],
+    /// `offOrigin` `[x, y, z]`, mm.
+    pub off_origin: [f64; 3],
+}
+
+/// Read a TIGRE / NAF geometry JSON file (the fields of [`ConeBeam`]) and validate it. With
+/// `grid`, `nVoxel`, `dVoxel` and `offOrigin` may be omitted and are taken from it. Every error
+/// names the file (and the field when one is wrong).
+pub fn read_json(path: &Path, grid: Option<&VoxelGrid>) -> Result<ConeBeam> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let mut value: serde_json::Value = serde_json::from_str(&text)
+        .map_err(|e| Error::format(path, "json", format!("not valid JSON: {e}")))?;
+    let obj = value.as_object_mut().ok_or_else(|| {
+        Error::format(path, "json", "expected a JSON object with the TIGRE fields")
+    })?;
+    if let Some(g) = grid {
+        obj.entry("nVoxel")
+            .or_insert_with(|| serde_json::json!(g.n_voxel));
+        obj.entry("dVoxel")
+            .or_insert_with(|| serde_json::json!(g.d_voxel));
+        obj.entry("offOrigin")
+            .or_insert_with(|| serde_json::json!(g.off_origin));
+    }
+    let geo: ConeBeam = serde_json::from_value(value).map_err(|e| {
+        Error::format(
+            path,
+            "json",
+            format!(
+                "not a TIGRE/NAF geometry ({e}; fields DSD, DSO, nDetector, dDetector, nVoxel, \
+                 dVoxel, optional offOrigin, offDetector, mode, accuracy)"
+            ),
+        )
+    })?;
+    geo.validate().map_err(|e| match e {
+        Error::Invalid { field, msg } => Error::format(path, field, msg),
+        other => other,
+    })?;
+    Ok(geo)
 }
 
 /// A pinhole (or orthographic) camera for one projection angle.
@@ -305,18 +383,7 @@ mod tests {
     use super::*;
 
     fn geo() -> ConeBeam {
-        ConeBeam {
-            dsd: 1500.0,
-            dso: 1000.0,
-            n_detector: [64, 80],
-            d_detector: [2.0, 1.5],
-            n_voxel: [32, 32, 32],
-            d_voxel: [1.0, 1.0, 1.0],
-            off_origin: [0.0; 3],
-            off_detector: [0.0, 0.0],
-            mode: Mode::Cone,
-            accuracy: 0.5,
-        }
+        ConeBeam::centred([64, 80], [2.0, 1.5], [32, 32, 32], [1.0, 1.0, 1.0])
     }
 
     #[test]
@@ -375,6 +442,38 @@ mod tests {
         g.d_voxel[1] = f64::NAN;
         let e = g.validate().unwrap_err().to_string();
         assert!(e.contains("dVoxel[1]"), "{e}");
+    }
+
+    #[test]
+    fn read_json_fills_the_grid_and_names_file_and_field() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("g.json");
+        let base =
+            r#"{"DSD": 1500.0, "DSO": 1000.0, "nDetector": [64, 80], "dDetector": [2.0, 1.5]"#;
+        std::fs::write(&p, format!("{base}}}")).unwrap();
+        let grid = VoxelGrid {
+            n_voxel: [32, 32, 32],
+            d_voxel: [1.0; 3],
+            off_origin: [0.0; 3],
+        };
+        assert_eq!(read_json(&p, Some(&grid)).unwrap(), geo());
+        // Without a grid the volume fields are required.
+        let e = read_json(&p, None).unwrap_err().to_string();
+        assert!(e.contains("g.json") && e.contains("nVoxel"), "{e}");
+        // Given fields win over the grid.
+        std::fs::write(&p, format!(r#"{base}, "nVoxel": [8, 8, 8]}}"#)).unwrap();
+        assert_eq!(read_json(&p, Some(&grid)).unwrap().n_voxel, [8, 8, 8]);
+        // A bad field: the file and the field are named.
+        std::fs::write(&p, base.replace("1500.0", "-1.0") + "}").unwrap();
+        let e = read_json(&p, Some(&grid)).unwrap_err().to_string();
+        assert!(e.contains("g.json") && e.contains("DSD"), "{e}");
+        for (text, needle) in [("[1, 2]", "JSON object"), ("{", "not valid JSON")] {
+            std::fs::write(&p, text).unwrap();
+            let e = read_json(&p, Some(&grid)).unwrap_err().to_string();
+            assert!(e.contains("g.json") && e.contains(needle), "{e}");
+        }
+        let e = read_json(&dir.path().join("missing.json"), None).unwrap_err();
+        assert!(e.to_string().contains("missing.json"), "{e}");
     }
 }
 

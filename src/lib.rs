@@ -11,15 +11,22 @@
 //!   -> gaussians (Eq. 1 model, Eq. 2 RIRF, ACUI init, PLY)
 //!   -> render (Eqs. 3-5: projection, tiles, compositing; forward + backward)
 //!   -> loss (Eqs. 6-9: SPWM, weighted Charbonnier, SSIM)
-//!   -> optim (Adam, schedules) -> densify -> train -> eval -> report
+//!   -> optim (Adam, schedules) -> densify -> eval (PSNR, SSIM, fps) -> train -> report
 //! ```
+
+// The library never prints (progress leaves as events, `train::event`); only `cli` does.
+#![cfg_attr(not(test), warn(clippy::print_stdout, clippy::print_stderr))]
 
 // Foundations shared by every stage.
 pub mod error;
+/// Atomic file writes (temporary name + rename) and output-folder hygiene.
+pub mod fsio;
 pub mod image2d;
 pub mod math;
 pub mod par;
+pub mod preview;
 pub mod real;
+pub mod simd;
 
 // The pipeline, in data-flow order (one stage per module).
 
@@ -51,16 +58,23 @@ pub mod optim;
 /// Adaptive density control: clone, split, prune, opacity reset.
 pub mod densify;
 
+/// Evaluation: PSNR, SSIM, fps (also run inside the training loop).
+pub mod eval;
+
 /// Method presets and the training loop.
 pub mod train;
-
-/// Evaluation: PSNR, SSIM, fps.
-pub mod eval;
 
 /// Tables of finished runs.
 pub mod report;
 
+/// `unispine reproduce`: plans of datasets x methods x seeds, tables with verdicts, charts.
+pub mod reproduce;
+
+/// Numerical audits: gradient checks against finite differences, benchmark scenes.
+pub mod audit;
+
 // Front end.
+#[allow(clippy::print_stdout, clippy::print_stderr)]
 pub mod cli;
 
 pub use error::{Error, Result};

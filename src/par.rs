@@ -1,4 +1,4 @@
-//! Deterministic parallelism helpers (DESIGN.md principle 4).
+//! Deterministic parallelism helpers (the determinism rule of `paper_notes.md`, Conventions).
 //!
 //! rayon's float `sum`/`reduce`/`fold` change bits with the thread count and even from run to
 //! run. Every parallel reduction in this crate goes through fixed-size chunks whose partial

@@ -3,11 +3,11 @@
 //! independent writer below), and errors for bad input.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
+use common::cli::run;
 use ndarray::{Array1, Array2};
 
-const BIN: &str = env!("CARGO_BIN_EXE_unispine");
+mod common;
 
 /// One Gaussian as stored in a 3DGS PLY (62 float32 fields).
 #[derive(Clone)]
@@ -75,17 +75,10 @@ fn scene() -> Vec<Stored> {
 
 fn write_geometry(dir: &Path) -> PathBuf {
     let p = dir.join("geometry.json");
-    std::fs::write(
-        &p,
-        r#"{"DSD": 1500.0, "DSO": 1000.0, "nDetector": [24, 28], "dDetector": [4.0, 4.0],
-            "nVoxel": [32, 32, 32], "dVoxel": [2.0, 2.0, 2.0], "offDetector": [2.0, -3.0]}"#,
-    )
-    .unwrap();
+    let extra =
+        r#", "nVoxel": [32, 32, 32], "dVoxel": [2.0, 2.0, 2.0], "offDetector": [2.0, -3.0]"#;
+    common::cli::write_geometry(&p, [1500.0, 1000.0], [24, 28], 4.0, extra);
     p
-}
-
-fn run(args: &[&str]) -> std::process::Output {
-    Command::new(BIN).args(args).output().expect("run unispine")
 }
 
 fn render(ply: &Path, geo: &Path, out: &Path, weights: Option<&Path>) -> Array2<f32> {
@@ -104,8 +97,7 @@ fn render(ply: &Path, geo: &Path, out: &Path, weights: Option<&Path>) -> Array2<
         a.push("--grad-weights".into());
         a.push(w.display().to_string());
     }
-    let o = Command::new(BIN).args(&a).output().unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    common::cli::ok(&a);
     ndarray_npy::read_npy(out.join("image.npy")).unwrap()
 }
 
@@ -217,49 +209,45 @@ fn bad_inputs_are_clear_errors() {
     let out = dir.path().join("out").display().to_string();
     let (g, p) = (geo.display().to_string(), ply.display().to_string());
 
-    let o = run(&[
-        "render",
-        "--ply",
-        "nope.ply",
-        "--geometry",
-        &g,
-        "--angle-deg",
-        "0",
-        "--out",
-        &out,
-    ]);
-    assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("nope.ply"));
+    let args_for = |ply: &str| -> Vec<String> {
+        [
+            "render",
+            "--ply",
+            ply,
+            "--geometry",
+            g.as_str(),
+            "--angle-deg",
+            "0",
+            "--out",
+            out.as_str(),
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let o = run(&args_for("nope.ply"));
+    assert!(!o.ok);
+    assert!(o.stderr.contains("nope.ply"));
 
     let wrong = dir.path().join("w.npy");
     ndarray_npy::write_npy(&wrong, &Array2::<f32>::zeros((5, 5))).unwrap();
     let wp = wrong.display().to_string();
-    let args = [
-        "render",
-        "--ply",
-        &p,
-        "--geometry",
-        &g,
-        "--angle-deg",
-        "0",
-        "--out",
-        &out,
-    ];
+    let args = args_for(&p);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let o = run(&[&args[..], &["--grad-weights", &wp]].concat());
-    assert!(!o.status.success());
-    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.ok);
+    let e = o.stderr;
     assert!(e.contains("does not match") && e.contains("w.npy"), "{e}");
 
     let o = run(&["render", "--ply", &p, "--out", &out]);
-    assert!(!o.status.success(), "no view given");
+    assert!(!o.ok, "no view given");
 
     let o = run(&[&args[..], &["--active-features", "5"]].concat());
-    assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("active-features"));
+    assert!(!o.ok);
+    assert!(o.stderr.contains("active-features"));
 
     let o = run(&[&args[..], &["--background", "NaN"]].concat());
-    assert!(!o.status.success());
-    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.ok);
+    let e = o.stderr;
     assert!(e.contains("--background") && e.contains("NaN"), "{e}");
 
     // A NaN in the model is reported, not rendered.
@@ -267,7 +255,7 @@ fn bad_inputs_are_clear_errors() {
     s[1].opacity = f32::NAN;
     write_ply(&ply, &s);
     let o = run(&args);
-    assert!(!o.status.success());
-    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.ok);
+    let e = o.stderr;
     assert!(e.contains("opacity") || e.contains("NaN"), "{e}");
 }

@@ -5,24 +5,12 @@
 //! `src/render/composite/tests.rs`.)
 
 use unispine::gaussians::Gaussians;
-use unispine::geometry::{Camera, ConeBeam, Mode};
+use unispine::geometry::{Camera, ConeBeam};
 use unispine::image2d::Image2d;
 use unispine::render::{self, composite, RenderSettings};
 
 fn camera() -> Camera {
-    ConeBeam {
-        dsd: 1500.0,
-        dso: 1000.0,
-        n_detector: [24, 32],
-        d_detector: [1.0, 1.0],
-        n_voxel: [16, 16, 16],
-        d_voxel: [2.0, 2.0, 2.0],
-        off_origin: [0.0; 3],
-        off_detector: [0.0; 2],
-        mode: Mode::Cone,
-        accuracy: 0.5,
-    }
-    .camera(0.0)
+    ConeBeam::centred([24, 32], [1.0, 1.0], [16, 16, 16], [2.0, 2.0, 2.0]).camera(0.0)
 }
 
 fn settings(bg: f64) -> RenderSettings {

@@ -2,10 +2,11 @@
 //! errors on bad input (missing file, unknown format, NaN voxels, zero views, bad pickle).
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use ndarray::{Array3, ShapeBuilder};
 use unispine::dataset::{pickle, store, Dataset};
+
+mod common;
 
 const SMALL: [&str; 6] = [
     "--detector",
@@ -20,32 +21,14 @@ fn manifest() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-fn run(args: &[&str]) -> Output {
-    run_threads(args, None)
-}
-
-fn run_threads(args: &[&str], threads: Option<usize>) -> Output {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_unispine"));
-    c.arg("data").args(args);
-    if let Some(t) = threads {
-        c.env("RAYON_NUM_THREADS", t.to_string());
-    }
-    c.output().expect("run unispine")
-}
-
+/// `unispine data ARGS`, which must succeed; its stdout.
 fn ok(args: &[&str]) -> String {
-    let o = run(args);
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "{args:?} failed:\n{err}");
-    String::from_utf8_lossy(&o.stdout).to_string()
+    common::cli::ok(&[&["data"][..], args].concat())
 }
 
+/// `unispine data ARGS`, which must fail without a panic; its stderr.
 fn fails(args: &[&str]) -> String {
-    let o = run(args);
-    assert!(!o.status.success(), "{args:?} should fail");
-    let e = String::from_utf8_lossy(&o.stderr).to_string();
-    assert!(!e.contains("panicked"), "{args:?} panicked:\n{e}");
-    e
+    common::cli::fails(&[&["data"][..], args].concat())
 }
 
 fn with_small<'a>(v: &[&'a str]) -> Vec<&'a str> {
@@ -124,8 +107,8 @@ fn phantom_dataset_and_its_determinism() {
             ]
             .concat(),
         );
-        let o = run_threads(&args, Some(t));
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let o = common::cli::run_threads(&[&["data"][..], &args].concat(), Some(t));
+        assert!(o.ok, "{}", o.stderr);
         files.push(["train.npy", "test.npy"].map(|f| std::fs::read(d.join(f)).unwrap()));
     }
     assert!(

@@ -4,22 +4,15 @@ use std::path::Path;
 
 use ndarray::{Array3, ShapeBuilder};
 use unispine::dataset::{store, Dataset, Manifest, Split};
-use unispine::geometry::{ConeBeam, Mode};
+use unispine::geometry::ConeBeam;
 use unispine::image2d::Image2d;
 use unispine::volume::{Provenance, Volume};
 
 fn geometry() -> ConeBeam {
     ConeBeam {
-        dsd: 1500.0,
-        dso: 1000.0,
-        n_detector: [6, 7],
-        d_detector: [1.25, 1.5],
-        n_voxel: [4, 5, 3],
-        d_voxel: [1.0, 0.75, 2.0],
         off_origin: [0.5, -1.0, 2.0],
         off_detector: [0.25, -0.5],
-        mode: Mode::Cone,
-        accuracy: 0.5,
+        ..ConeBeam::centred([6, 7], [1.25, 1.5], [4, 5, 3], [1.0, 0.75, 2.0])
     }
 }
 
@@ -293,4 +286,55 @@ fn load_names_bad_json_fields() {
     });
     let e = err_of(tmp.path());
     assert!(e.contains("volume") && e.contains("offOrigin"), "{e}");
+}
+
+/// Saving over an earlier dataset: stale previews go, a save that fails part-way leaves no
+/// `dataset.json` (so `load` refuses the mix of new arrays and an old description), and
+/// `data ct` refuses to write over its own input volume.
+#[test]
+fn saving_over_a_dataset_leaves_no_mix() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path();
+    store::save(&dataset(9, 9), d).unwrap();
+    let pngs = |d: &Path| -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(d.join("previews"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+            .collect();
+        v.sort();
+        v
+    };
+    let many = pngs(d);
+    store::save(&dataset(2, 1), d).unwrap();
+    let few = pngs(d);
+    assert!(few.len() < many.len(), "{few:?}");
+    assert!(few.iter().all(|p| !p.starts_with("train_008")), "{few:?}");
+    // Fail part-way: the previews folder is a file, so writing previews fails after the arrays.
+    std::fs::remove_dir_all(d.join("previews")).unwrap();
+    std::fs::write(d.join("previews"), b"in the way").unwrap();
+    assert!(store::save(&dataset(4, 2), d).is_err());
+    assert!(!d.join("dataset.json").exists());
+    assert!(err_of(d).contains("dataset.json"));
+    // No temporary file is left behind.
+    for e in std::fs::read_dir(d).unwrap() {
+        let n = e.unwrap().file_name().to_string_lossy().to_string();
+        assert!(!n.ends_with(".tmp"), "{n}");
+    }
+    // The CLI refuses to overwrite its input.
+    std::fs::remove_file(d.join("previews")).unwrap();
+    store::save(&dataset(2, 1), d).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_unispine"))
+        .args(["data", "ct", "--volume"])
+        .arg(d.join("volume.npy"))
+        .arg("--out")
+        .arg(d)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--volume") && err.contains("overwritten"),
+        "{err}"
+    );
+    assert_eq!(store::load(d).unwrap(), dataset(2, 1));
 }

@@ -15,10 +15,10 @@ const EXTENT: f64 = 100.0; // clone/split boundary 1.0, world prune 10.0
 fn marked(scales: &[f64]) -> TrainState<f64> {
     let n = scales.len();
     let mut g = Gaussians::<f64>::zeros(n);
-    for i in 0..n {
+    for (i, &scale) in scales.iter().enumerate() {
         let x = i as f64;
         g.means[i] = [x, x + 0.1, x + 0.2];
-        g.log_scales[i] = [scales[i].ln(); 3];
+        g.log_scales[i] = [scale.ln(); 3];
         g.quats[i] = [1.0, 0.0, 0.0, x * 1e-3];
         g.opacity_logits[i] = 0.0;
         g.features[i] = std::array::from_fn(|k| x + k as f64 * 1e-2);
@@ -133,8 +133,7 @@ fn split_replaces_big_gaussians_by_two_smaller_ones() {
     for (j, &i) in ids.iter().enumerate().skip(2) {
         check_aligned(&s, j, i, true);
     }
-    for j in 3..7 {
-        let i = ids[j];
+    for (j, &i) in ids.iter().enumerate().take(7).skip(3) {
         let want = (if i == 1 { 2.0f64 } else { 3.0 } / 1.6).ln();
         assert!(s.params.log_scales[j]
             .iter()
@@ -283,4 +282,77 @@ fn schedule_matches_train_py() {
     assert!(c.resets(4000) && !c.resets(8000) && !c.resets(3999));
     assert!(c.collects(7999) && !c.collects(8000));
     assert!(!c.prunes_big(4000) && c.prunes_big(4200));
+}
+
+/// The densification statistic |dL/dmean2d| in NDC (3DGS `viewspace_point_tensor.grad`) has a
+/// fixed scale and axis order: the rasterizer's pixel coordinate is ndc2Pix(x, S) =
+/// ((x + 1) S - 1) / 2 (3DGS `auxiliary.h`), so dL/dndc_u = (W / 2) dL/du and dL/dndc_v =
+/// (H / 2) dL/dv. The pixel-space gradient is taken here by central differences of the
+/// compositor's forward pass alone, on a non-square detector (W = 40, H = 24) with a weight
+/// image that pulls differently along u and v, so doubling the statistic or swapping W and H
+/// fails.
+#[test]
+fn ndc_mean_gradient_has_the_3dgs_scale_and_axis_order() {
+    use unispine::geometry::ConeBeam;
+    use unispine::image2d::Image2d;
+    use unispine::render::{self, composite, ColorMode, RenderSettings};
+    let geo = ConeBeam::centred([24, 40], [3.0, 3.0], [32, 32, 32], [2.0, 2.0, 2.0]);
+    let cam = geo.camera(0.3);
+    let (w, h) = (cam.width, cam.height);
+    assert_eq!((w, h), (40, 24));
+    let mut g = Gaussians::<f64>::zeros(1);
+    g.means[0] = [5.0, -3.0, 4.0];
+    g.log_scales[0] = [3.0f64.ln(), 4.0f64.ln(), 3.5f64.ln()];
+    g.quats[0] = [1.0, 0.1, -0.2, 0.05];
+    g.opacity_logits[0] = 0.5;
+    g.features[0][0] = 0.8;
+    let settings = RenderSettings {
+        color: ColorMode::RirfXgaussian,
+        active_features: 1,
+        background: 0.0,
+    };
+    let (img, saved) = render::forward(&g, &cam, &settings).unwrap();
+    // Weights linear in (u, v) with different slopes, zero where the splat is faint (so no
+    // pixel crosses the compositor's 1/255 alpha cut-off under the perturbation).
+    let peak = img.data.iter().cloned().fold(0.0, f64::max);
+    let wimg = Image2d::from_vec(
+        w,
+        h,
+        (0..w * h)
+            .map(|i| {
+                let (u, v) = ((i % w) as f64, (i / w) as f64);
+                if img.data[i] > 0.05 * peak {
+                    0.3 + 0.07 * u - 0.11 * v
+                } else {
+                    0.0
+                }
+            })
+            .collect(),
+    );
+    let grads = render::backward(&g, &cam, &settings, &saved, &wimg);
+    let loss = |s: &unispine::render::Splats<f64>| -> f64 {
+        let (im, _) = composite::forward(s, w, h, 0.0);
+        im.data.iter().zip(&wimg.data).map(|(a, b)| a * b).sum()
+    };
+    let step = 1e-5;
+    let mut d_pix = [0.0; 2];
+    for (a, d) in d_pix.iter_mut().enumerate() {
+        let (mut p, mut m) = (saved.splats.clone(), saved.splats.clone());
+        p.mean2d[0][a] += step;
+        m.mean2d[0][a] -= step;
+        *d = (loss(&p) - loss(&m)) / (2.0 * step);
+    }
+    assert!(d_pix[0].abs() > 1e-3 && d_pix[1].abs() > 1e-3, "{d_pix:?}");
+    let expect = ((d_pix[0] * w as f64 / 2.0).powi(2) + (d_pix[1] * h as f64 / 2.0).powi(2)).sqrt();
+    let swapped =
+        ((d_pix[0] * h as f64 / 2.0).powi(2) + (d_pix[1] * w as f64 / 2.0).powi(2)).sqrt();
+    assert!(
+        (expect - swapped).abs() > 0.05 * expect,
+        "{expect} vs {swapped}"
+    );
+    let got = grads.mean2d_ndc_norm[0];
+    assert!(
+        (got - expect).abs() <= 1e-6 * expect,
+        "NDC statistic {got}, closed form from the pixel gradient {expect}"
+    );
 }

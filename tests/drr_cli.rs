@@ -2,11 +2,11 @@
 //! library), and the errors for bad input.
 
 use std::path::Path;
-use std::process::Command;
 
+use common::cli::{run, Run};
 use ndarray::{Array3, Ix3};
 
-const BIN: &str = env!("CARGO_BIN_EXE_unispine");
+mod common;
 
 /// A 16 x 12 x 10 volume (1 mm voxels, `[x, y, z]`) of value `val` everywhere.
 fn write_volume(path: &Path, val: f32, nan_at: Option<[usize; 3]>) {
@@ -19,19 +19,26 @@ fn write_volume(path: &Path, val: f32, nan_at: Option<[usize; 3]>) {
 
 /// Cone-beam geometry without nVoxel / dVoxel / offOrigin (taken from the volume).
 fn write_geometry(path: &Path, extra: &str) {
-    let text = format!(
-        r#"{{"DSD": 300.0, "DSO": 200.0, "nDetector": [9, 11], "dDetector": [3.0, 3.0]{extra}}}"#
-    );
-    std::fs::write(path, text).unwrap();
+    common::cli::write_geometry(path, [300.0, 200.0], [9, 11], 3.0, extra);
 }
 
-fn run(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(BIN).args(args).output().unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+/// `unispine drr --volume VOL --geometry GEO --out OUT EXTRA...`, with `--angles-deg 0` unless
+/// EXTRA gives the angles.
+fn drr(vol: &Path, geo: &Path, out: &Path, extra: &[&str]) -> Run {
+    let mut args = vec![
+        "drr",
+        "--volume",
+        vol.to_str().unwrap(),
+        "--geometry",
+        geo.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    if !extra.contains(&"--angles-deg") {
+        args.extend_from_slice(&["--angles-deg", "0"]);
+    }
+    run(&args)
 }
 
 #[test]
@@ -43,19 +50,14 @@ fn drr_writes_projections_pngs_and_metadata() {
     write_geometry(&geo, "");
     for method in ["siddon", "trilinear"] {
         let out = dir.path().join(method);
-        let (ok, _, err) = run(&[
-            "drr",
-            "--volume",
-            vol.to_str().unwrap(),
-            "--geometry",
-            geo.to_str().unwrap(),
-            "--angles-deg",
-            "0,90,-45",
-            "--method",
-            method,
-            "--out",
-            out.to_str().unwrap(),
-        ]);
+        let Run {
+            ok, stderr: err, ..
+        } = drr(
+            &vol,
+            &geo,
+            &out,
+            &["--angles-deg", "0,90,-45", "--method", method],
+        );
         assert!(ok, "{method}: {err}");
         let p: ndarray::ArrayD<f32> = ndarray_npy::read_npy(out.join("projections.npy")).unwrap();
         let p = p.into_dimensionality::<Ix3>().unwrap();
@@ -107,21 +109,9 @@ fn drr_f64_and_hu_conversion() {
     write_volume(&vol, 0.0, None);
     write_geometry(&geo, r#", "nVoxel": [16, 12, 10], "dVoxel": [1, 1, 1]"#);
     let out = dir.path().join("o");
-    let (ok, _, err) = run(&[
-        "drr",
-        "--volume",
-        vol.to_str().unwrap(),
-        "--geometry",
-        geo.to_str().unwrap(),
-        "--angles-deg",
-        "0",
-        "--precision",
-        "f64",
-        "--hu",
-        "naf-mu",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let Run {
+        ok, stderr: err, ..
+    } = drr(&vol, &geo, &out, &["--precision", "f64", "--hu", "naf-mu"]);
     assert!(ok, "{err}");
     let p: ndarray::ArrayD<f32> = ndarray_npy::read_npy(out.join("projections.npy")).unwrap();
     assert!(
@@ -137,21 +127,9 @@ fn expect_error(args_extra: &[&str], vol_nan: bool, geo_extra: &str, needle: &[&
     let geo = dir.path().join("geo.json");
     write_volume(&vol, 1.0, vol_nan.then_some([3, 4, 5]));
     write_geometry(&geo, geo_extra);
-    let out = dir.path().join("o");
-    let mut args = vec![
-        "drr",
-        "--volume",
-        vol.to_str().unwrap(),
-        "--geometry",
-        geo.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    args.extend_from_slice(args_extra);
-    if !args_extra.contains(&"--angles-deg") {
-        args.extend_from_slice(&["--angles-deg", "0"]);
-    }
-    let (ok, _, err) = run(&args);
+    let Run {
+        ok, stderr: err, ..
+    } = drr(&vol, &geo, &dir.path().join("o"), args_extra);
     assert!(!ok, "expected a failure for {args_extra:?} {geo_extra}");
     assert!(!err.contains("panicked"), "{err}");
     for n in needle {
@@ -166,17 +144,9 @@ fn drr_bad_inputs_give_clear_errors() {
     let geo = dir.path().join("geo.json");
     write_geometry(&geo, "");
     let missing = dir.path().join("nope.nii.gz");
-    let (ok, _, err) = run(&[
-        "drr",
-        "--volume",
-        missing.to_str().unwrap(),
-        "--geometry",
-        geo.to_str().unwrap(),
-        "--angles-deg",
-        "0",
-        "--out",
-        dir.path().join("o").to_str().unwrap(),
-    ]);
+    let Run {
+        ok, stderr: err, ..
+    } = drr(&missing, &geo, &dir.path().join("o"), &[]);
     assert!(!ok && err.contains("nope.nii.gz"), "{err}");
     // NaN voxel: the voxel is named.
     expect_error(&[], true, "", &["(3, 4, 5)"]);
@@ -202,23 +172,18 @@ fn drr_missing_geometry_file_is_named() {
     let dir = tempfile::tempdir().unwrap();
     let vol = dir.path().join("vol.npy");
     write_volume(&vol, 1.0, None);
-    let (ok, _, err) = run(&[
-        "drr",
-        "--volume",
-        vol.to_str().unwrap(),
-        "--geometry",
-        dir.path().join("missing.json").to_str().unwrap(),
-        "--angles-deg",
-        "0",
-        "--out",
-        dir.path().join("o").to_str().unwrap(),
-    ]);
+    let missing = dir.path().join("missing.json");
+    let Run {
+        ok, stderr: err, ..
+    } = drr(&vol, &missing, &dir.path().join("o"), &[]);
     assert!(!ok && err.contains("missing.json"), "{err}");
 }
 
 #[test]
 fn drr_help_explains_each_flag() {
-    let (ok, out, _) = run(&["drr", "--help"]);
+    let Run {
+        ok, stdout: out, ..
+    } = run(&["drr", "--help"]);
     assert!(ok);
     for flag in [
         "--volume",

@@ -388,3 +388,41 @@ fn numpy_reference_agrees() {
     regenerate_if_asked();
     run_numpy_reference("tools/loss_reference.py");
 }
+
+/// The golden cases that claim the paper / code constants hold the Rust defaults (and the
+/// presets' values), and tools/loss_reference.py pins the same cases to constants written
+/// from the upstream sources: a changed Rust default fails here, a regenerated golden file with
+/// it fails the numpy reference.
+#[test]
+fn default_cases_hold_the_rust_defaults() {
+    use unispine::train::{Method, TrainConfig};
+    let uni = TrainConfig::preset(Method::Unispine);
+    let xg = TrainConfig::preset(Method::Xgaussian);
+    let spwm_def = spwm_json(&SpwmConfig::default());
+    assert_eq!(spwm_json(uni.spwm.as_ref().unwrap()), spwm_def);
+    for (folder, stem) in [
+        ("eq06-spwm-prior", "structured"),
+        ("eq07-spwm-weights", "warmup"),
+    ] {
+        assert_eq!(
+            read_case(folder, stem)["inputs"]["spwm"],
+            spwm_def,
+            "{folder}/{stem}"
+        );
+    }
+    let loss = |c: &LossConfig| serde_json::to_value(c).unwrap();
+    for (stem, want) in [
+        ("weighted-charbonnier-dssim", &uni.loss),
+        ("l1-dssim", &xg.loss),
+        ("charbonnier-dssim", &LossConfig::charbonnier_dssim()),
+    ] {
+        assert_eq!(
+            read_case("eq08-hybrid-loss", stem)["inputs"]["loss"],
+            loss(want),
+            "{stem}"
+        );
+    }
+    let w = read_case("eq09-weighted-charbonnier", "spwm-weights");
+    assert_eq!(w["inputs"]["eps"].as_f64(), Some(uni.loss.charbonnier_eps));
+    assert_eq!(w["inputs"]["delta"].as_f64(), Some(uni.loss.delta));
+}

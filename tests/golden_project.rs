@@ -42,16 +42,9 @@ fn case(equation: &str, description: &str, inputs: Value) -> Value {
 
 fn geometry(mode: Mode, n_det: [usize; 2], pitch: [f64; 2], off: [f64; 2]) -> ConeBeam {
     ConeBeam {
-        dsd: 1500.0,
-        dso: 1000.0,
-        n_detector: n_det,
-        d_detector: pitch,
-        n_voxel: [32, 32, 32],
-        d_voxel: [2.0, 2.0, 2.0],
-        off_origin: [0.0; 3],
         off_detector: off,
         mode,
-        accuracy: 0.5,
+        ..ConeBeam::centred(n_det, pitch, [32, 32, 32], [2.0, 2.0, 2.0])
     }
 }
 

@@ -29,16 +29,9 @@ const TOL_REL: f64 = 1e-8;
 
 fn geometry(mode: Mode, n_det: [usize; 2], pitch: f64, off: [f64; 2]) -> ConeBeam {
     ConeBeam {
-        dsd: 1500.0,
-        dso: 1000.0,
-        n_detector: n_det,
-        d_detector: [pitch, pitch],
-        n_voxel: [16, 16, 16],
-        d_voxel: [2.0, 2.0, 2.0],
-        off_origin: [0.0; 3],
         off_detector: off,
         mode,
-        accuracy: 0.5,
+        ..ConeBeam::centred(n_det, [pitch, pitch], [16, 16, 16], [2.0, 2.0, 2.0])
     }
 }
 

@@ -115,7 +115,7 @@ fn phantom_and_proxy_are_bit_identical_for_1_2_8_threads() {
 
 #[test]
 fn attenuation_table_matches_its_sources() {
-    // Independent recomputation from research/data.md section 4.3: mass attenuation x density
+    // Independent recomputation from deepdrr 1.2.2's NIST tables: mass attenuation x density
     // (cm^-1 -> mm^-1) and the HU rule mu = 0.01936 (1 + HU/1000) /mm.
     let hu = |h: f64| 0.01936 * (1.0 + h / 1000.0);
     let expect = [

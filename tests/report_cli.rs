@@ -1,10 +1,13 @@
-//! `unispine report`: the table rows come from each run's metrics.json; a folder without one is
-//! an error naming the file.
+//! `unispine report`: the table rows come from each run's metrics.json; a folder without one
+//! gets a row saying so (the others are still reported), a stopped run shows no PSNR.
 
-use std::process::Command;
+use std::ffi::OsStr;
 
+use common::cli;
 use unispine::render::RenderSettings;
 use unispine::train::{EvalPoint, Metrics};
+
+mod common;
 
 fn metrics(method: &str, psnr: f64, n: usize) -> Metrics {
     Metrics {
@@ -19,6 +22,7 @@ fn metrics(method: &str, psnr: f64, n: usize) -> Metrics {
         render_fps: Some(41.25),
         render_fps_protocol: String::new(),
         n_gaussians: n,
+        model_bytes: None,
         peak_memory_bytes: Some(3 * 1024 * 1024),
         extent: 1285.36,
         render: RenderSettings::default(),
@@ -39,20 +43,13 @@ fn report_prints_one_row_per_run_and_names_missing_files() {
         std::fs::write(d.join("metrics.json"), serde_json::to_string(m).unwrap()).unwrap();
     }
     let out_file = dir.path().join("table.md");
-    let out = Command::new(env!("CARGO_BIN_EXE_unispine"))
-        .arg("report")
-        .arg(dir.path().join("a"))
-        .arg(dir.path().join("b"))
-        .arg("--out")
-        .arg(&out_file)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let table = String::from_utf8(out.stdout).unwrap();
+    let table = cli::ok(&[
+        OsStr::new("report"),
+        dir.path().join("a").as_os_str(),
+        dir.path().join("b").as_os_str(),
+        OsStr::new("--out"),
+        out_file.as_os_str(),
+    ]);
     assert_eq!(table, std::fs::read_to_string(&out_file).unwrap());
     let rows: Vec<&str> = table.lines().skip(2).collect();
     assert_eq!(rows.len(), 2);
@@ -63,16 +60,44 @@ fn report_prints_one_row_per_run_and_names_missing_files() {
     );
     assert!(rows[1].starts_with("| b | 3dgs |"), "{}", rows[1]);
 
+    // A folder without metrics.json and a stopped run, beside a finished one.
     let missing = dir.path().join("nothing-here");
     std::fs::create_dir_all(&missing).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_unispine"))
-        .arg("report")
-        .arg(&missing)
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("metrics.json"), "{err}");
+    let mut stopped = metrics("unispine", 30.0, 99);
+    stopped.completed = false;
+    stopped.test_psnr = None;
+    stopped.test_ssim = None;
+    stopped.render_fps = None;
+    let sd = dir.path().join("stopped");
+    std::fs::create_dir_all(&sd).unwrap();
+    std::fs::write(
+        sd.join("metrics.json"),
+        serde_json::to_string(&stopped).unwrap(),
+    )
+    .unwrap();
+    let a = dir.path().join("a");
+    let table = cli::ok(&[
+        OsStr::new("report"),
+        missing.as_os_str(),
+        sd.as_os_str(),
+        a.as_os_str(),
+    ]);
+    let rows: Vec<&str> = table.lines().skip(2).collect();
+    assert!(
+        rows[0].starts_with("| nothing-here | no metrics.json"),
+        "{}",
+        rows[0]
+    );
+    assert!(
+        rows[1].starts_with("| stopped | unispine | 1000 (stopped) | - | - |"),
+        "{}",
+        rows[1]
+    );
+    assert!(rows[2].starts_with("| a | unispine |"), "{}", rows[2]);
+    // A folder that does not exist is still an error naming it.
+    let gone = dir.path().join("no-such-run");
+    let err = cli::fails(&[OsStr::new("report"), gone.as_os_str()]);
+    assert!(err.contains("no-such-run"), "{err}");
 }
 
 /// `--charts DIR` writes tradeoff.svg (one marker per run in each panel, placed by value) and
@@ -110,20 +135,14 @@ fn report_charts_place_runs_by_value_and_name_bad_logs() {
         std::fs::write(d.join("log.csv"), log).unwrap();
     }
     let charts = dir.path().join("charts");
-    let run = |args: &[&std::path::Path]| {
-        let mut c = Command::new(env!("CARGO_BIN_EXE_unispine"));
-        c.arg("report");
-        for a in args {
-            c.arg(a);
-        }
-        c.arg("--charts").arg(&charts).output().unwrap()
+    let run = |runs: &[&std::path::Path]| {
+        let mut args: Vec<&OsStr> = vec![OsStr::new("report")];
+        args.extend(runs.iter().map(|p| p.as_os_str()));
+        args.extend([OsStr::new("--charts"), charts.as_os_str()]);
+        cli::run(&args)
     };
     let out = run(&[&dir.path().join("a"), &dir.path().join("b")]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert!(out.ok, "{}", out.stderr);
 
     let tradeoff = std::fs::read_to_string(charts.join("tradeoff.svg")).unwrap();
     assert!(tradeoff.starts_with("<svg"));
@@ -146,7 +165,7 @@ fn report_charts_place_runs_by_value_and_name_bad_logs() {
     )
     .unwrap();
     let out = run(&[&dir.path().join("b")]);
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.ok);
+    let err = out.stderr;
     assert!(err.contains("log.csv") && err.contains("line 2"), "{err}");
 }

@@ -10,7 +10,7 @@ Written from the equations, not from the Rust code:
   (axis-angle), not the polynomial quaternion matrix;
 - SH constants from their closed forms (sqrt(k / pi) / m);
 - the camera (pose, intrinsics, principal point) built from the TIGRE geometry following the
-  NAF convention written in DESIGN.md;
+  NAF convention written in `src/geometry.rs` and `paper_notes.md` (Conventions);
 - Sigma2D eigenvalues from the half-difference form, the Jacobian from the perspective map's
   partial derivatives, the conic by numpy's matrix inverse.
 

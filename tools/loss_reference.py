@@ -31,6 +31,43 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 FOLDERS = ["eq06-spwm-prior", "eq07-spwm-weights", "eq08-hybrid-loss", "eq09-weighted-charbonnier"]
 
+# The paper / code constants, written here from their upstream sources (not from the Rust code),
+# so that a changed Rust default fails the golden tests: the cases in PINNED must carry exactly
+# these values in their inputs, and tests/golden_losses.rs checks that the Rust defaults
+# serialise to those inputs.
+# SPWM: UniSpine-GS (github.com/orangeisland66/UniSpine-GS) config/example.yaml (attn_alpha,
+# attn_hf_lambda, attn_blur_kernel, attn_blur_sigma, attn_adaptive_gate, attn_gate_quantile,
+# attn_gate_thresh, attn_warmup_start, attn_warmup_iters) and train.py (tau clamped to
+# [0, 0.98]; the gate is a clamped linear ramp). gate_temperature is ours (only used by the
+# sigmoid gate, which the code does not have).
+SPWM_PAPER = {
+    "alpha": 0.8, "hf_lambda": 0.5, "blur_kernel": 3, "blur_sigma": 1.5, "adaptive_gate": True,
+    "quantile": 0.85, "tau_max": 0.98, "fixed_tau": 0.4, "warmup_start": 2000,
+    "warmup_iters": 5000, "gate": "clamped-linear", "gate_temperature": 0.05,
+}
+# Loss, Eqs. (8)-(9): lambda_dssim 0.2 (config/example.yaml), Charbonnier eps 1e-3 (train.py
+# argparse default charb_eps) and delta 1e-6 (utils/loss_utils.py, hard-coded).
+LOSS_PAPER = {"lambda_dssim": 0.2, "charbonnier_eps": 1e-3, "delta": 1e-6}
+PINNED = {
+    ("eq06-spwm-prior", "structured"): {"spwm": SPWM_PAPER},
+    ("eq07-spwm-weights", "warmup"): {"spwm": SPWM_PAPER},
+    ("eq08-hybrid-loss", "weighted-charbonnier-dssim"):
+        {"loss": dict(LOSS_PAPER, data_term="weighted-charbonnier")},
+    ("eq08-hybrid-loss", "l1-dssim"): {"loss": dict(LOSS_PAPER, data_term="l1")},
+    ("eq08-hybrid-loss", "charbonnier-dssim"): {"loss": dict(LOSS_PAPER, data_term="charbonnier")},
+    ("eq09-weighted-charbonnier", "spwm-weights"):
+        {"eps": LOSS_PAPER["charbonnier_eps"], "delta": LOSS_PAPER["delta"]},
+}
+
+
+def check_pinned(folder, stem, inputs):
+    """Raise if a pinned case's inputs differ from the paper / code constants."""
+    for key, want in PINNED.get((folder, stem), {}).items():
+        if inputs.get(key) != want:
+            raise ValueError(f"{folder}/{stem}.json: inputs.{key} = {inputs.get(key)} differs from "
+                             f"the paper / code constants {want}")
+
+
 SOBEL_X = np.array([[-1.0, 0.0, 1.0], [-2.0, 0.0, 2.0], [-1.0, 0.0, 1.0]])
 SOBEL_Y = np.array([[-1.0, -2.0, -1.0], [0.0, 0.0, 0.0], [1.0, 2.0, 1.0]])
 C1 = 0.01 ** 2
@@ -182,8 +219,22 @@ def run_case(folder, inputs):
     raise ValueError(f"unknown folder {folder}")
 
 
+def pinned_and_run(folder, stem, inputs):
+    check_pinned(folder, stem, inputs)
+    return run_case(folder, inputs)
+
+
 def main():
-    return check_folders(FOLDERS, lambda folder, _stem, inputs: run_case(folder, inputs))
+    missing = [k for k in PINNED if not (pathlib.Path(__file__).resolve().parent.parent / "golden"
+                                          / k[0] / f"{k[1]}.json").exists()]
+    if missing:
+        print(f"FAIL pinned cases missing: {missing}")
+        return 1
+    try:
+        return check_folders(FOLDERS, pinned_and_run)
+    except ValueError as e:
+        print(f"FAIL {e}")
+        return 1
 
 
 if __name__ == "__main__":

@@ -90,10 +90,10 @@ pub struct DatasetFlags {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Source-detector distance in mm (NAF / SAX-NeRF / UniSpine-GS: 1500).
-    #[arg(long, default_value_t = 1500.0)]
+    #[arg(long, default_value_t = crate::geometry::DSD_MM)]
     pub dsd: f64,
     /// Source-origin distance in mm (NAF / SAX-NeRF / UniSpine-GS: 1000).
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = crate::geometry::DSO_MM)]
     pub dso: f64,
     /// Beam shape.
     #[arg(long, value_enum, default_value = "cone")]
@@ -172,7 +172,7 @@ pub struct ImportArgs {
     pub out: PathBuf,
     /// Factor applied to the stored projections: NAF-family generators compute them in metres,
     /// 1000 converts to our mm. Use 1 for pickles already in mm.
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = crate::geometry::DSO_MM)]
     pub projection_scale: f64,
 }
 
@@ -373,6 +373,11 @@ fn cap_voxels(vol: Volume<f32>, n: usize) -> anyhow::Result<Volume<f32>> {
 fn run_ct(a: CtArgs) -> anyhow::Result<()> {
     let ids = parse_label_ids(&a.crop_labels)?;
     let _ = options(&a.data, "", "")?;
+    let outs = store::output_files(&a.data.out);
+    crate::fsio::check_not_output("--volume", &a.volume, &outs)?;
+    if let Some(m) = &a.mask {
+        crate::fsio::check_not_output("--mask", m, &outs)?;
+    }
     eprintln!("loading {}", a.volume.display());
     let mut vol = crate::volume::load(&a.volume)?;
     vol.check_finite(&format!("{}", a.volume.display()))?;
@@ -412,6 +417,7 @@ fn run_ct(a: CtArgs) -> anyhow::Result<()> {
 
 fn run_us(a: UsArgs) -> anyhow::Result<()> {
     let _ = options(&a.data, "", "")?;
+    crate::fsio::check_not_output("--volume", &a.volume, &store::output_files(&a.data.out))?;
     eprintln!("loading {}", a.volume.display());
     let mut vol = crate::volume::load(&a.volume)?;
     vol.check_finite(&format!("{}", a.volume.display()))?;
@@ -430,6 +436,7 @@ fn run_us(a: UsArgs) -> anyhow::Result<()> {
 }
 
 fn run_import(a: ImportArgs) -> anyhow::Result<()> {
+    crate::fsio::check_not_output("--pickle", &a.pickle, &store::output_files(&a.out))?;
     eprintln!("reading {}", a.pickle.display());
     let ds = pickle::import(
         &a.pickle,

@@ -11,7 +11,7 @@
 //! `offOrigin` may be omitted: they are then taken from the volume (its dims, voxel size and
 //! offset). When given they must describe the volume's grid (checked, the error names the field).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Mutex;
 
 use anyhow::{bail, Context};
@@ -19,10 +19,10 @@ use ndarray::Array3;
 
 use crate::cli::progress::Progress;
 use crate::cli::render::Precision;
-use crate::dataset::store::write_png;
 use crate::drr::{self, Method};
-use crate::geometry::ConeBeam;
+use crate::geometry::{self, ConeBeam, VoxelGrid};
 use crate::image2d::Image2d;
+use crate::preview::write_png;
 use crate::real::Real;
 use crate::volume::attenuation::HuConversion;
 use crate::volume::{self, Volume};
@@ -76,9 +76,16 @@ pub fn run(args: DrrArgs) -> anyhow::Result<()> {
     };
     let vol = volume::load(&args.volume)
         .with_context(|| format!("reading --volume {}", args.volume.display()))?;
-    let geo = read_geometry(&args.geometry, &vol)?;
+    let grid = VoxelGrid {
+        n_voxel: vol.dims,
+        d_voxel: vol.spacing,
+        off_origin: vol.offset,
+    };
+    let geo = geometry::read_json(&args.geometry, Some(&grid)).context("--geometry")?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
+    let outs = [args.out.join("projections.npy"), args.out.join("drr.json")];
+    crate::fsio::check_not_output("--volume", &args.volume, &outs)?;
     match args.precision {
         Precision::F32 => project_and_write::<f32>(&args, vol, &geo, &angles_deg, method),
         Precision::F64 => project_and_write::<f64>(&args, vol.cast(), &geo, &angles_deg, method),
@@ -102,37 +109,6 @@ fn parse_angles(s: &str) -> anyhow::Result<Vec<f64>> {
         out.push(v);
     }
     Ok(out)
-}
-
-/// The geometry JSON with `nVoxel` / `dVoxel` / `offOrigin` filled in from the volume when
-/// omitted.
-fn read_geometry<R: Real>(path: &Path, vol: &Volume<R>) -> anyhow::Result<ConeBeam> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read --geometry {}", path.display()))?;
-    let mut value: serde_json::Value = serde_json::from_str(&text)
-        .with_context(|| format!("--geometry {}: not valid JSON", path.display()))?;
-    let obj = value.as_object_mut().with_context(|| {
-        format!(
-            "--geometry {}: expected a JSON object with the TIGRE fields",
-            path.display()
-        )
-    })?;
-    obj.entry("nVoxel")
-        .or_insert_with(|| serde_json::json!(vol.dims));
-    obj.entry("dVoxel")
-        .or_insert_with(|| serde_json::json!(vol.spacing));
-    obj.entry("offOrigin")
-        .or_insert_with(|| serde_json::json!(vol.offset));
-    let geo: ConeBeam = serde_json::from_value(value).with_context(|| {
-        format!(
-            "--geometry {}: not a TIGRE/NAF geometry (fields DSD, DSO, nDetector, dDetector, \
-             optional nVoxel, dVoxel, offOrigin, offDetector, mode, accuracy)",
-            path.display()
-        )
-    })?;
-    geo.validate()
-        .with_context(|| format!("--geometry {}", path.display()))?;
-    Ok(geo)
 }
 
 fn project_and_write<R: Real>(
@@ -161,6 +137,8 @@ fn project_and_write<R: Real>(
         p.finish(&format!("{} views", angles.len()));
     }
     let (w, h) = (geo.n_detector[1], geo.n_detector[0]);
+    // Views of an earlier, longer angle list would look like part of this one.
+    crate::fsio::remove_matching(&args.out, "view_", ".png")?;
     let mut stack = Array3::<f32>::zeros((views.len(), h, w));
     for (k, img) in views.iter().enumerate() {
         let img32: Vec<f32> = img.data.iter().map(|v| v.f64() as f32).collect();
@@ -181,9 +159,7 @@ fn project_and_write<R: Real>(
         "units": "line integral: mm x volume value (after --hu); row 0 = top (+z)",
         "volume": vol.provenance,
     });
-    let json = args.out.join("drr.json");
-    std::fs::write(&json, serde_json::to_string_pretty(&meta)?)
-        .with_context(|| format!("writing {}", json.display()))?;
+    crate::fsio::write_json_atomic(&args.out.join("drr.json"), &meta)?;
     println!("{} views [{h} x {w}] -> {}", views.len(), npy.display());
     Ok(())
 }

@@ -8,6 +8,8 @@ pub mod gradcheck;
 pub mod progress;
 pub mod render;
 pub mod report;
+pub mod reproduce;
+pub mod signals;
 pub mod train;
 
 use clap::{Parser, Subcommand};
@@ -40,6 +42,8 @@ pub enum Command {
     Report(report::ReportArgs),
     /// Benchmarks that print ratios against a baseline measured in the same run.
     Bench(bench::BenchArgs),
+    /// Regenerate the paper's tables from a plan (datasets x methods x seeds) with verdicts.
+    Reproduce(reproduce::ReproduceArgs),
 }
 
 /// Run the parsed command line.
@@ -53,5 +57,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Eval(a) => eval::run(a),
         Command::Report(a) => report::run(a),
         Command::Bench(a) => bench::run(a),
+        Command::Reproduce(a) => reproduce::run(a),
     }
 }

@@ -16,10 +16,12 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
-use ndarray::{Array1, Array2};
+use ndarray::Array2;
 
+use crate::gaussians::model::N_FEATURES;
+use crate::gaussians::ply::FeatureLayout;
 use crate::gaussians::{ply, Gaussians};
-use crate::geometry::{Camera, ConeBeam};
+use crate::geometry::{self, Camera};
 use crate::image2d::Image2d;
 use crate::real::Real;
 use crate::render::{self, ColorMode, RenderSettings};
@@ -28,8 +30,12 @@ use crate::render::{self, ColorMode, RenderSettings};
 #[derive(Debug, clap::Args)]
 pub struct RenderArgs {
     /// Gaussians in the 3DGS PLY layout (pre-activation parameters, as 3DGS and X-Gaussian write).
+    #[arg(long, required_unless_present = "run", conflicts_with = "run")]
+    pub ply: Option<PathBuf>,
+    /// A run folder of `unispine train`: its saved model (`model.ply`, or the checkpoint of a
+    /// stopped run) with the render settings it records.
     #[arg(long)]
-    pub ply: PathBuf,
+    pub run: Option<PathBuf>,
     /// Dataset folder (from `unispine data`) whose geometry and view angle to use.
     #[arg(long, conflicts_with_all = ["geometry", "angle_deg"], requires = "view")]
     pub dataset: Option<PathBuf>,
@@ -45,14 +51,18 @@ pub struct RenderArgs {
     pub angle_deg: Option<f64>,
     /// Intensity model: `rirf-paper` (Eq. 2, sigmoid), `rirf-xgaussian` (X-Gaussian code,
     /// max(0, 0.5 + lambda . f)) or `sh` (view-dependent SH colour, the 3DGS baseline).
-    #[arg(long, value_enum, default_value = "rirf-paper")]
-    pub color: ColorArg,
-    /// Number of active features / SH coefficients (1, 4, 9 or 16).
-    #[arg(long, default_value_t = 16)]
-    pub active_features: usize,
-    /// Background value (added with the final transmittance).
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    pub background: f64,
+    /// Default: the model's recorded one (`comment unispine-render` in PLYs written by
+    /// `unispine train`), else `rirf-paper`. A value that contradicts the record is an error.
+    #[arg(long, value_enum)]
+    pub color: Option<ColorArg>,
+    /// Number of active features / SH coefficients (1, 4, 9 or 16). Default: the model's
+    /// recorded value, else 16.
+    #[arg(long)]
+    pub active_features: Option<usize>,
+    /// Background value (added with the final transmittance). Default: the model's recorded
+    /// value, else 0.
+    #[arg(long, allow_hyphen_values = true)]
+    pub background: Option<f64>,
     /// Upstream gradient W (npy, f32 or f64, shape [v, u]): also write the gradient of
     /// sum(W * image) with respect to every stored PLY field to `grads.npz`.
     #[arg(long)]
@@ -82,28 +92,7 @@ pub enum Precision {
 
 /// Run `unispine render`.
 pub fn run(args: RenderArgs) -> anyhow::Result<()> {
-    if ![1, 4, 9, 16].contains(&args.active_features) {
-        bail!(
-            "--active-features must be 1, 4, 9 or 16 (got {})",
-            args.active_features
-        );
-    }
-    if !args.background.is_finite() {
-        bail!(
-            "--background must be a finite number (got {})",
-            args.background
-        );
-    }
     let cam = camera(&args)?;
-    let settings = RenderSettings {
-        color: match args.color {
-            ColorArg::RirfPaper => ColorMode::RirfPaper,
-            ColorArg::RirfXgaussian => ColorMode::RirfXgaussian,
-            ColorArg::Sh => ColorMode::Sh,
-        },
-        active_features: args.active_features,
-        background: args.background,
-    };
     let weights = match &args.grad_weights {
         Some(p) => Some(read_weights(p, &cam)?),
         None => None,
@@ -111,9 +100,78 @@ pub fn run(args: RenderArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
     match args.precision {
-        Precision::F32 => render_and_write::<f32>(&args, &cam, &settings, weights.as_ref()),
-        Precision::F64 => render_and_write::<f64>(&args, &cam, &settings, weights.as_ref()),
+        Precision::F32 => render_and_write::<f32>(&args, &cam, weights.as_ref()),
+        Precision::F64 => render_and_write::<f64>(&args, &cam, weights.as_ref()),
     }
+}
+
+/// The model (from `--ply` or `--run`), its source path, the settings it records, and the
+/// layout of its stored features (a run's model has the layout [`ply::write_ply`] writes).
+fn load_model<R: Real>(
+    args: &RenderArgs,
+) -> anyhow::Result<(Gaussians<R>, PathBuf, Option<RenderSettings>, FeatureLayout)> {
+    if let Some(run) = &args.run {
+        let m = crate::train::RunDir::open(run)?.read_model()?;
+        let layout = FeatureLayout {
+            channels: 3,
+            rest_per_channel: N_FEATURES - 1,
+        };
+        return Ok((m.gaussians.cast(), m.path, Some(m.render), layout));
+    }
+    let path = args.ply.clone().context("--ply or --run is required")?;
+    let (g, layout, comments) = ply::read_ply_full::<R>(&path)?;
+    let recorded = RenderSettings::from_ply_comments(&path, &comments)?;
+    Ok((g, path, recorded, layout))
+}
+
+/// The render settings: each flag given, else the model's record, else the defaults. An
+/// explicit `--color` that contradicts the record is an error (the image would be silently
+/// wrong).
+fn settings(
+    args: &RenderArgs,
+    model: &Path,
+    recorded: Option<&RenderSettings>,
+) -> anyhow::Result<RenderSettings> {
+    let color = args.color.map(|c| match c {
+        ColorArg::RirfPaper => ColorMode::RirfPaper,
+        ColorArg::RirfXgaussian => ColorMode::RirfXgaussian,
+        ColorArg::Sh => ColorMode::Sh,
+    });
+    if let (Some(c), Some(r)) = (color, recorded) {
+        if c != r.color {
+            bail!(
+                "--color {c:?} contradicts {}, which records the intensity model {:?} it was \
+                 trained with; omit --color",
+                model.display(),
+                r.color
+            );
+        }
+    }
+    let def = RenderSettings::default();
+    let s = RenderSettings {
+        color: color.or(recorded.map(|r| r.color)).unwrap_or(def.color),
+        active_features: args
+            .active_features
+            .or(recorded.map(|r| r.active_features))
+            .unwrap_or(def.active_features),
+        background: args
+            .background
+            .or(recorded.map(|r| r.background))
+            .unwrap_or(def.background),
+    };
+    if !crate::gaussians::rirf::valid_active(s.active_features) {
+        bail!(
+            "--active-features must be 1, 4, 9 or 16 (got {})",
+            s.active_features
+        );
+    }
+    if !s.background.is_finite() {
+        bail!(
+            "--background must be a finite number (got {})",
+            s.background
+        );
+    }
+    Ok(s)
 }
 
 /// The camera named by `--dataset/--view` or `--geometry/--angle-deg`.
@@ -139,12 +197,7 @@ fn camera(args: &RenderArgs) -> anyhow::Result<Camera> {
         return Ok(ds.geometry.camera(angle));
     }
     if let (Some(g), Some(a)) = (&args.geometry, args.angle_deg) {
-        let text = std::fs::read_to_string(g)
-            .with_context(|| format!("cannot read geometry file {}", g.display()))?;
-        let geo: ConeBeam = serde_json::from_str(&text)
-            .with_context(|| format!("geometry file {}: not a TIGRE/NAF geometry", g.display()))?;
-        geo.validate()
-            .with_context(|| format!("geometry file {}", g.display()))?;
+        let geo = geometry::read_json(g, None).context("--geometry")?;
         if !a.is_finite() {
             bail!("--angle-deg must be finite (got {a})");
         }
@@ -181,17 +234,17 @@ fn read_weights(path: &Path, cam: &Camera) -> anyhow::Result<Image2d<f64>> {
 fn render_and_write<R: Real>(
     args: &RenderArgs,
     cam: &Camera,
-    settings: &RenderSettings,
     weights: Option<&Image2d<f64>>,
 ) -> anyhow::Result<()> {
-    let g: Gaussians<R> = ply::read_ply(&args.ply)?;
+    let (g, model, recorded, layout) = load_model::<R>(args)?;
+    let settings = &settings(args, &model, recorded.as_ref())?;
     let (img, saved) = render::forward(&g, cam, settings)
-        .with_context(|| format!("rendering {}", args.ply.display()))?;
+        .with_context(|| format!("rendering {}", model.display()))?;
     let img32: Vec<f32> = img.data.iter().map(|v| v.f64() as f32).collect();
     let arr = Array2::from_shape_vec((img.height, img.width), img32.clone())?;
     let npy = args.out.join("image.npy");
     ndarray_npy::write_npy(&npy, &arr).with_context(|| format!("writing {}", npy.display()))?;
-    crate::dataset::store::write_png(
+    crate::preview::write_png(
         &args.out.join("image.png"),
         &Image2d::from_vec(img.width, img.height, img32),
     )?;
@@ -200,55 +253,9 @@ fn render_and_write<R: Real>(
     if let Some(w) = weights {
         let d_image: Image2d<R> = w.cast();
         let grads = render::backward(&g, cam, settings, &saved, &d_image);
-        let n_rest = rest_per_channel(&args.ply)?;
         let path = args.out.join("grads.npz");
-        write_grads(&path, &grads.params, n_rest)?;
+        ply::StoredGrads::new(&grads.params, layout).write_npz(&path)?;
         println!("gradients of sum(W * image): {}", path.display());
     }
-    Ok(())
-}
-
-/// Number of `f_rest` coefficients per channel stored in the PLY (0, 3, 8 or 15).
-fn rest_per_channel(path: &Path) -> anyhow::Result<usize> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let end = bytes
-        .windows(10)
-        .position(|w| w == b"end_header")
-        .with_context(|| format!("{}: no PLY header", path.display()))?;
-    let header = String::from_utf8_lossy(&bytes[..end]);
-    let n = header
-        .lines()
-        .filter(|l| {
-            l.split_whitespace()
-                .last()
-                .is_some_and(|p| p.starts_with("f_rest_"))
-        })
-        .count();
-    Ok(n / 3)
-}
-
-/// Gradients with respect to the stored PLY fields (see the module header).
-fn write_grads<R: Real>(path: &Path, d: &Gaussians<R>, n_rest: usize) -> anyhow::Result<()> {
-    let n = d.len();
-    let f = |x: R| x.f64();
-    let xyz = Array2::from_shape_fn((n, 3), |(i, a)| f(d.means[i][a]));
-    let scale = Array2::from_shape_fn((n, 3), |(i, a)| f(d.log_scales[i][a]));
-    let rot = Array2::from_shape_fn((n, 4), |(i, a)| f(d.quats[i][a]));
-    let opacity = Array1::from_shape_fn(n, |i| f(d.opacity_logits[i]));
-    // Stored order: f_dc_0..2 (coefficient 0 per channel), then f_rest_{c * K + (k - 1)}.
-    let third = 1.0 / 3.0;
-    let features = Array2::from_shape_fn((n, 3 + 3 * n_rest), |(i, j)| {
-        let k = if j < 3 { 0 } else { (j - 3) % n_rest + 1 };
-        f(d.features[i][k]) * third
-    });
-    let file =
-        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    let mut npz = ndarray_npy::NpzWriter::new(file);
-    npz.add_array("xyz", &xyz)?;
-    npz.add_array("features", &features)?;
-    npz.add_array("opacity", &opacity)?;
-    npz.add_array("scale", &scale)?;
-    npz.add_array("rot", &rot)?;
-    npz.finish()?;
     Ok(())
 }

@@ -26,7 +26,7 @@ pub fn run(a: ReportArgs) -> anyhow::Result<()> {
     let table = crate::report::table(&a.runs)?;
     print!("{table}");
     if let Some(p) = a.out {
-        std::fs::write(&p, &table).with_context(|| format!("{}: cannot write", p.display()))?;
+        crate::fsio::write_atomic(&p, table.as_bytes())?;
     }
     if let Some(dir) = a.charts {
         std::fs::create_dir_all(&dir)
@@ -36,7 +36,7 @@ pub fn run(a: ReportArgs) -> anyhow::Result<()> {
             ("curves.svg", crate::report::curves_chart(&a.runs)?),
         ] {
             let p = dir.join(name);
-            std::fs::write(&p, svg).with_context(|| format!("{}: cannot write", p.display()))?;
+            crate::fsio::write_atomic(&p, svg.as_bytes())?;
             eprintln!("wrote {}", p.display());
         }
     }

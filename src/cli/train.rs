@@ -1,33 +1,41 @@
-//! `unispine train --data DIR --method M --iters N --out RUN [--seed S] [overrides]`.
+//! `unispine train --data DIR --method M --iters N --out RUN [--seed S] [overrides]`, and
+//! `unispine train --resume RUN` to continue a stopped run with the same bits.
 //!
 //! Trains a method preset on a dataset folder (from `unispine data`), with a progress bar
-//! (iteration, loss, PSNR, number of Gaussians, iterations per second), a clean stop on Ctrl-C
-//! that still writes a checkpoint, and the run folder described in [`crate::train`].
+//! (iteration, loss, PSNR, number of Gaussians, iterations per second), a clean stop on
+//! SIGINT / SIGTERM that writes a checkpoint and exits 130 / 143 ([`super::signals`]), and the
+//! run folder described in [`crate::train::run_dir`].
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 
-use anyhow::Context;
+use anyhow::{bail, Context};
 
 use super::progress::Progress;
-use crate::train::{self, Event, Method, TrainOverrides};
+use super::signals;
+use crate::error::Error;
+use crate::train::{self, Control, Event, Method, RunDir, TrainOverrides};
 
 /// Arguments of `unispine train`.
 #[derive(Debug, clap::Args)]
 pub struct TrainArgs {
-    /// Dataset folder written by `unispine data`.
-    #[arg(long)]
-    pub data: PathBuf,
+    /// Dataset folder written by `unispine data` (with `--resume`: default the run's own).
+    #[arg(long, required_unless_present = "resume")]
+    pub data: Option<PathBuf>,
     /// Method preset.
     #[arg(long, value_enum, default_value = "unispine")]
     pub method: Method,
     /// Training iterations (paper: 20000).
     #[arg(long)]
     pub iters: Option<usize>,
-    /// Run folder (created; files in it are replaced).
-    #[arg(long)]
-    pub out: PathBuf,
+    /// Run folder (created; the files of an earlier run in it are removed first).
+    #[arg(long, required_unless_present = "resume", conflicts_with = "resume")]
+    pub out: Option<PathBuf>,
+    /// Continue the stopped run in this folder from its checkpoint, with its config.
+    #[arg(long, conflicts_with_all = ["iters", "TrainOverrides"])]
+    pub resume: Option<PathBuf>,
+    /// Stop (as on a signal, with a checkpoint) once this many iterations are complete.
+    #[arg(long, hide = true)]
+    pub stop_after: Option<usize>,
     /// rayon threads (default: all cores). Results do not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
@@ -59,27 +67,46 @@ pub fn init_threads(threads: Option<usize>) -> anyhow::Result<()> {
 /// Run `unispine train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     init_threads(args.threads)?;
-    let mut cfg = args.overrides.apply(args.method, args.iters)?;
-    cfg.data = Some(args.data.display().to_string());
-    let ds = crate::dataset::store::load(&args.data)?;
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        ctrlc::set_handler(move || {
-            if stop.swap(true, Ordering::SeqCst) {
-                eprintln!("second Ctrl-C: exiting without a checkpoint");
-                std::process::exit(130);
-            }
-            eprintln!("\nCtrl-C: stopping after this iteration and writing a checkpoint ...");
-        })
-        .context("installing the Ctrl-C handler")?;
+    if args.resume.is_some() && args.method != Method::Unispine {
+        bail!("--method cannot be combined with --resume (the run's config.json is used)");
     }
+    let (cfg, ds, out) = match &args.resume {
+        Some(run) => {
+            let rd = RunDir::open(run)?;
+            let cfg: train::TrainConfig = rd.read_config()?;
+            let data = match (&args.data, rd.dataset_path()?) {
+                (Some(d), _) => d.clone(),
+                (None, Some(d)) => d,
+                (None, None) => bail!("the run's config.json names no dataset: pass --data"),
+            };
+            let ds = crate::dataset::store::load(&data)?;
+            (cfg, ds, run.clone())
+        }
+        None => {
+            let (Some(data), Some(out)) = (&args.data, &args.out) else {
+                bail!("--data and --out are required (or --resume RUN)");
+            };
+            let mut cfg = args.overrides.apply(args.method, args.iters)?;
+            // Absolute, so that `eval --run` and `--resume` work from any folder.
+            let abs = data
+                .canonicalize()
+                .with_context(|| format!("--data {}", data.display()))?;
+            cfg.data = Some(abs.display().to_string());
+            let ds = crate::dataset::store::load(data)?;
+            (cfg, ds, out.clone())
+        }
+    };
+    signals::install()?;
     eprintln!(
-        "training `{}` on {} for {} iterations -> {}",
+        "{} `{}` for {} iterations -> {}",
+        if args.resume.is_some() {
+            "resuming"
+        } else {
+            "training"
+        },
         cfg.method.name(),
-        args.data.display(),
         cfg.iterations,
-        args.out.display()
+        out.display()
     );
     let mut bar: Option<Progress> = None;
     let mut on_event = |e: &Event| match e {
@@ -123,22 +150,44 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         Event::Stopped { iteration } => eprintln!("\nstopped after iteration {iteration}"),
         _ => {}
     };
-    let m = train::run(&cfg, &ds, Some(&args.out), &stop, &mut on_event);
+    let ctl = Control {
+        stop: &signals::STOP,
+        stop_after: args.stop_after,
+    };
+    let m = match &args.resume {
+        Some(run) => train::resume(run, &ds, ctl, &mut on_event),
+        None => train::run_with(&cfg, &ds, Some(&out), ctl, &mut on_event),
+    };
     if let Some(b) = bar.take() {
         b.finish("");
     }
-    let m = m.with_context(|| {
-        format!(
-            "the last good state is in {}",
-            args.out.join("checkpoint.ply").display()
-        )
-    })?;
+    let ckpt = out.join(train::run_dir::CHECKPOINT);
+    let m = match m {
+        Ok(m) => m,
+        // Only a divergence has a last good state worth naming, and only when it was written.
+        Err(e @ Error::Diverged { .. }) if ckpt.is_file() => {
+            return Err(e).with_context(|| {
+                format!(
+                    "the last good state is in {} (continue with `unispine train --resume {}` \
+                     after changing what diverged, or evaluate it with `unispine eval --run {}`)",
+                    ckpt.display(),
+                    out.display(),
+                    out.display()
+                )
+            })
+        }
+        Err(e) => return Err(e.into()),
+    };
     if !m.completed {
         println!(
-            "stopped at iteration {}; checkpoint: {}",
+            "stopped at iteration {}; checkpoint: {} (continue with `unispine train --resume {}`)",
             m.iterations,
-            args.out.join("checkpoint.ply").display()
+            ckpt.display(),
+            out.display()
         );
+        if let Some(code) = signals::exit_code() {
+            std::process::exit(code);
+        }
         return Ok(());
     }
     println!(
@@ -150,6 +199,6 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         m.train_time_s,
         m.render_fps.unwrap_or(f64::NAN)
     );
-    println!("outputs: {}", args.out.display());
+    println!("outputs: {}", out.display());
     Ok(())
 }

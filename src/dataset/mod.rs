@@ -6,6 +6,7 @@
 pub mod generate;
 pub mod pickle;
 pub mod store;
+pub mod targets;
 
 use serde::{Deserialize, Serialize};
 

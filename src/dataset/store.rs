@@ -34,6 +34,7 @@ use super::{Dataset, Manifest, Split};
 use crate::error::{Error, Result};
 use crate::geometry::ConeBeam;
 use crate::image2d::Image2d;
+use crate::preview::{min_max, write_png};
 use crate::volume::{Provenance, Volume};
 
 /// Value of the `format` field of `dataset.json`.
@@ -157,11 +158,33 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> Error + '_ {
     move |e| Error::io(path, e)
 }
 
+/// The files [`save`] writes into `dir` (besides `previews/`): a command whose input is one of
+/// them must refuse to run (see [`crate::fsio::check_not_output`]).
+pub fn output_files(dir: &Path) -> Vec<std::path::PathBuf> {
+    ["dataset.json", "train.npy", "test.npy", "volume.npy"]
+        .iter()
+        .map(|f| dir.join(f))
+        .collect()
+}
+
 /// Write `ds` into the folder `dir` (created if missing). Refuses an inconsistent dataset
 /// (see [`check`]).
+///
+/// An earlier dataset in `dir` is retired first: `dataset.json` is removed before anything else
+/// is written and written again last, and the arrays and previews of the earlier dataset are
+/// removed, so a save that fails part-way leaves a folder that [`load`] refuses (no
+/// `dataset.json`) rather than new arrays beside an old description. Every file is written
+/// atomically ([`crate::fsio::write_atomic`]).
 pub fn save(ds: &Dataset, dir: &Path) -> Result<()> {
     check(ds)?;
     std::fs::create_dir_all(dir).map_err(io(dir))?;
+    for f in output_files(dir) {
+        crate::fsio::remove_if_exists(&f)?;
+    }
+    let pdir = dir.join("previews");
+    for prefix in ["train_", "test_", "volume_"] {
+        crate::fsio::remove_matching(&pdir, prefix, ".png")?;
+    }
     let (w, h) = ds.geometry.image_size();
     write_split(&dir.join("train.npy"), &ds.train, h, w)?;
     write_split(&dir.join("test.npy"), &ds.test, h, w)?;
@@ -181,13 +204,8 @@ pub fn save(ds: &Dataset, dir: &Path) -> Result<()> {
                 value_max: hi as f64,
             })
         }
-        None => {
-            // A stale volume from an earlier dataset in the same folder would be misleading.
-            if vol_path.exists() {
-                std::fs::remove_file(&vol_path).map_err(io(&vol_path))?;
-            }
-            None
-        }
+        // A stale volume of an earlier dataset was removed above.
+        None => None,
     };
 
     let previews = write_previews(ds, dir)?;
@@ -208,17 +226,7 @@ pub fn save(ds: &Dataset, dir: &Path) -> Result<()> {
         "previews": previews,
     });
     let path = dir.join("dataset.json");
-    let text = serde_json::to_string_pretty(&json)
-        .map_err(|e| Error::format(&path, "dataset.json", e.to_string()))?;
-    std::fs::write(&path, text + "\n").map_err(io(&path))?;
-    Ok(())
-}
-
-fn min_max(x: &[f32]) -> (f32, f32) {
-    x.iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
-            (l.min(v), h.max(v))
-        })
+    crate::fsio::write_json_atomic(&path, &json)
 }
 
 fn write_split(path: &Path, s: &Split, h: usize, w: usize) -> Result<()> {
@@ -228,14 +236,23 @@ fn write_split(path: &Path, s: &Split, h: usize, w: usize) -> Result<()> {
     }
     let arr = Array3::from_shape_vec((s.projections.len(), h, w), flat)
         .map_err(|e| Error::format(path, "shape", e.to_string()))?;
-    ndarray_npy::write_npy(path, &arr).map_err(|e| Error::format(path, "npy", e.to_string()))
+    write_npy_atomic(path, &arr)
+}
+
+/// An f32 array as `.npy`, written atomically.
+fn write_npy_atomic(path: &Path, arr: &Array3<f32>) -> Result<()> {
+    use ndarray_npy::WriteNpyExt;
+    let mut buf = Vec::new();
+    arr.write_npy(&mut buf)
+        .map_err(|e| Error::format(path, "npy", e.to_string()))?;
+    crate::fsio::write_atomic(path, &buf)
 }
 
 fn write_volume(path: &Path, v: &Volume<f32>) -> Result<()> {
     // Our layout is x fastest, i.e. Fortran order of an [x, y, z] array.
     let arr = Array3::from_shape_vec((v.dims[0], v.dims[1], v.dims[2]).f(), v.data.clone())
         .map_err(|e| Error::format(path, "shape", e.to_string()))?;
-    ndarray_npy::write_npy(path, &arr).map_err(|e| Error::format(path, "npy", e.to_string()))
+    write_npy_atomic(path, &arr)
 }
 
 /// Indices of `m` views spread evenly over `n` (first and last included).
@@ -302,21 +319,6 @@ fn write_previews(ds: &Dataset, dir: &Path) -> Result<Vec<String>> {
         }
     }
     Ok(names)
-}
-
-/// Write an image min-max scaled to 8 bits (a constant image is black).
-pub fn write_png(path: &Path, img: &Image2d<f32>) -> Result<()> {
-    let (lo, hi) = min_max(&img.data);
-    let scale = if hi > lo { 255.0 / (hi - lo) } else { 0.0 };
-    let px: Vec<u8> = img
-        .data
-        .iter()
-        .map(|&v| ((v - lo) * scale).round().clamp(0.0, 255.0) as u8)
-        .collect();
-    let buf = image::GrayImage::from_raw(img.width as u32, img.height as u32, px)
-        .ok_or_else(|| Error::format(path, "png", "image buffer size"))?;
-    buf.save(path)
-        .map_err(|e| Error::format(path, "png", e.to_string()))
 }
 
 /// Read a dataset folder written by [`save`].

@@ -30,13 +30,13 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::gaussians::model::N_FEATURES;
+use crate::gaussians::rirf::ColorMode;
 use crate::gaussians::rirf::SH_C0;
 use crate::gaussians::Gaussians;
 use crate::geometry::ConeBeam;
 use crate::math::activations::logit;
 use crate::par::CHUNK;
 use crate::real::Real;
-use crate::render::ColorMode;
 
 /// How the initial positions are chosen.
 #[derive(
@@ -301,18 +301,7 @@ mod tests {
     }
 
     fn geo(n: [usize; 3], d: [f64; 3]) -> ConeBeam {
-        ConeBeam {
-            dsd: 1500.0,
-            dso: 1000.0,
-            n_detector: [32, 32],
-            d_detector: [1.0, 1.0],
-            n_voxel: n,
-            d_voxel: d,
-            off_origin: [0.0; 3],
-            off_detector: [0.0; 2],
-            mode: crate::geometry::Mode::Cone,
-            accuracy: 0.5,
-        }
+        ConeBeam::centred([32, 32], [1.0, 1.0], n, d)
     }
 
     #[test]
@@ -320,8 +309,8 @@ mod tests {
         for (seed, n) in [(1u64, 500usize), (2, 37), (3, 4), (4, 2)] {
             let mut p = random_positions(&geo([64, 32, 16], [1.0, 2.0, 3.0]), n, seed);
             // clustered points too
-            for i in 0..n / 5 {
-                p[i] = [0.01 * i as f64, 0.0, 0.0];
+            for (i, q) in p.iter_mut().enumerate().take(n / 5) {
+                *q = [0.01 * i as f64, 0.0, 0.0];
             }
             let a = knn3_mean_sq(&p);
             let b = brute(&p);

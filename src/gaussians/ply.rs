@@ -5,22 +5,43 @@
 //!
 //! Channels: 3DGS stores three colour channels. Our model has one intensity channel with 16
 //! features: writing repeats it in the three channels; reading averages the three (X-Gaussian
-//! keeps its channels identical, research/xgaussian_unispine.md §1). `f_rest` is channel-major
+//! keeps its channels identical and its renderer averages them, X-Gaussian
+//! `gaussian_renderer/__init__.py`). `f_rest` is channel-major
 //! as in 3DGS (`f_rest_{c * K + (k - 1)}` for channel c and coefficient k >= 1, K = number of
 //! rest coefficients per channel). Files with fewer `f_rest` fields (lower SH degree) load with
 //! the missing features at zero.
 
-use std::io::{BufRead, BufReader, Read, Seek, Write};
+use std::io::{BufRead, BufReader, Read, Seek};
 use std::path::Path;
+
+use ndarray::{Array1, Array2};
 
 use crate::error::{Error, Result};
 use crate::gaussians::model::{Gaussians, N_FEATURES};
 use crate::real::Real;
 
-/// Write `g` to `path` in the 3DGS layout (binary little-endian float32).
+/// Write `g` to `path` in the 3DGS layout (binary little-endian float32), atomically.
 pub fn write_ply<R: Real>(path: &Path, g: &Gaussians<R>) -> Result<()> {
+    write_ply_with_comments(path, g, &[])
+}
+
+/// [`write_ply`] with `comment` lines in the header (one line each, no newline inside); other
+/// PLY readers ignore them, [`read_ply_with_comments`] returns them.
+pub fn write_ply_with_comments<R: Real>(
+    path: &Path,
+    g: &Gaussians<R>,
+    comments: &[String],
+) -> Result<()> {
+    crate::fsio::write_atomic(path, &ply_bytes(g, comments))
+}
+
+/// The bytes of [`write_ply_with_comments`].
+pub fn ply_bytes<R: Real>(g: &Gaussians<R>, comments: &[String]) -> Vec<u8> {
     let rest = N_FEATURES - 1;
     let mut header = String::from("ply\nformat binary_little_endian 1.0\n");
+    for c in comments {
+        header += &format!("comment {}\n", c.replace(['\n', '\r'], " "));
+    }
     header += &format!("element vertex {}\n", g.len());
     let mut names: Vec<String> = ["x", "y", "z", "nx", "ny", "nz"]
         .iter()
@@ -51,8 +72,7 @@ pub fn write_ply<R: Real>(path: &Path, g: &Gaussians<R>) -> Result<()> {
         g.log_scales[i].iter().for_each(|&v| put(v));
         g.quats[i].iter().for_each(|&v| put(v));
     }
-    let mut f = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
-    f.write_all(&buf).map_err(|e| Error::io(path, e))
+    buf
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -113,9 +133,33 @@ impl Ty {
     }
 }
 
+/// How a PLY file stores the features: `channels` colour channels (`f_dc_0..channels-1`), each
+/// with `rest_per_channel` `f_rest` coefficients (channel-major, see the module header).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FeatureLayout {
+    pub channels: usize,
+    pub rest_per_channel: usize,
+}
+
 /// Read a 3DGS-layout PLY (binary little/big endian or ASCII). The three colour channels are
 /// averaged into our single intensity channel. Errors name the file and the missing or bad field.
 pub fn read_ply<R: Real>(path: &Path) -> Result<Gaussians<R>> {
+    read_ply_full(path).map(|(g, _, _)| g)
+}
+
+/// [`read_ply`], also returning the file's [`FeatureLayout`].
+pub fn read_ply_with_layout<R: Real>(path: &Path) -> Result<(Gaussians<R>, FeatureLayout)> {
+    read_ply_full(path).map(|(g, l, _)| (g, l))
+}
+
+/// [`read_ply`] and the header's `comment` lines (without the `comment ` prefix), in order.
+pub fn read_ply_with_comments<R: Real>(path: &Path) -> Result<(Gaussians<R>, Vec<String>)> {
+    read_ply_full(path).map(|(g, _, c)| (g, c))
+}
+
+/// [`read_ply`] with the file's [`FeatureLayout`] and header comments.
+pub fn read_ply_full<R: Real>(path: &Path) -> Result<(Gaussians<R>, FeatureLayout, Vec<String>)> {
+    let mut comments = Vec::new();
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let meta = file.metadata().map_err(|e| Error::io(path, e))?;
     if !meta.is_file() {
@@ -169,6 +213,10 @@ pub fn read_ply<R: Real>(path: &Path) -> Result<Gaussians<R>> {
     loop {
         read_line(&mut rd, &mut line)?;
         let t: Vec<&str> = line.split_whitespace().collect();
+        if let Some(c) = line.strip_prefix("comment ") {
+            comments.push(c.trim_end_matches(['\n', '\r']).to_string());
+            continue;
+        }
         match t.as_slice() {
             ["end_header"] => break,
             ["format", f, _] => format = Some(f.to_string()),
@@ -344,7 +392,65 @@ pub fn read_ply<R: Real>(path: &Path) -> Result<Gaussians<R>> {
     }
     g.check_finite()
         .map_err(|e| Error::format(path, "vertex", e.to_string()))?;
-    Ok(g)
+    Ok((
+        g,
+        FeatureLayout {
+            channels: ch,
+            rest_per_channel: per_ch,
+        },
+        comments,
+    ))
+}
+
+/// Gradients with respect to the fields stored in a PLY of layout `layout` (pre-activation, as
+/// stored), widened to f64: `xyz` [N, 3], `features` [N, C + C K] (`f_dc_0..C-1`, then
+/// `f_rest_{c K + (k - 1)}`, channel-major as stored), `opacity` [N] (logit), `scale` [N, 3]
+/// (log-scale), `rot` [N, 4] (w, x, y, z).
+#[derive(Clone, Debug, PartialEq)]
+pub struct StoredGrads {
+    pub xyz: Array2<f64>,
+    pub features: Array2<f64>,
+    pub opacity: Array1<f64>,
+    pub scale: Array2<f64>,
+    pub rot: Array2<f64>,
+}
+
+impl StoredGrads {
+    /// Map the gradient `d` of our model (one channel, [`N_FEATURES`] features) to the stored
+    /// fields. [`read_ply`] averages the C channels, so each stored channel gets 1/C of the
+    /// gradient of the averaged feature; coefficients beyond our 16 features are not read and
+    /// get 0.
+    pub fn new<R: Real>(d: &Gaussians<R>, layout: FeatureLayout) -> Self {
+        let n = d.len();
+        let f = |x: R| x.f64();
+        let (ch, k_rest) = (layout.channels, layout.rest_per_channel);
+        let share = 1.0 / ch as f64;
+        let features = Array2::from_shape_fn((n, ch + ch * k_rest), |(i, j)| {
+            let k = if j < ch { 0 } else { (j - ch) % k_rest + 1 };
+            d.features[i].get(k).map_or(0.0, |&x| f(x) * share)
+        });
+        StoredGrads {
+            xyz: Array2::from_shape_fn((n, 3), |(i, a)| f(d.means[i][a])),
+            features,
+            opacity: Array1::from_shape_fn(n, |i| f(d.opacity_logits[i])),
+            scale: Array2::from_shape_fn((n, 3), |(i, a)| f(d.log_scales[i][a])),
+            rot: Array2::from_shape_fn((n, 4), |(i, a)| f(d.quats[i][a])),
+        }
+    }
+
+    /// Write the five arrays to an npz file (keys `xyz`, `features`, `opacity`, `scale`, `rot`).
+    pub fn write_npz(&self, path: &Path) -> Result<()> {
+        let npz_err = |e: ndarray_npy::WriteNpzError| Error::format(path, "npz", e.to_string());
+        let file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
+        let mut npz = ndarray_npy::NpzWriter::new(file);
+        npz.add_array("xyz", &self.xyz).map_err(npz_err)?;
+        npz.add_array("features", &self.features).map_err(npz_err)?;
+        npz.add_array("opacity", &self.opacity).map_err(npz_err)?;
+        npz.add_array("scale", &self.scale).map_err(npz_err)?;
+        npz.add_array("rot", &self.rot).map_err(npz_err)?;
+        npz.finish().map_err(npz_err)?;
+        Ok(())
+    }
 }
 
 #[cfg(test)]
@@ -422,5 +528,66 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("magic"));
+    }
+
+    /// An ASCII PLY with `ch` channels and `k` rest coefficients per channel, feature values
+    /// `vals` (f_dc_0..ch-1 then f_rest_0..ch*k-1).
+    fn ascii_ply(path: &Path, ch: usize, k: usize, vals: &[f64]) {
+        let mut s = String::from("ply\nformat ascii 1.0\nelement vertex 1\n");
+        let mut names: Vec<String> = ["x", "y", "z"].map(String::from).to_vec();
+        names.extend((0..ch).map(|c| format!("f_dc_{c}")));
+        names.extend((0..ch * k).map(|i| format!("f_rest_{i}")));
+        names.extend(["opacity", "scale_0", "scale_1", "scale_2"].map(String::from));
+        names.extend(["rot_0", "rot_1", "rot_2", "rot_3"].map(String::from));
+        for n in &names {
+            s += &format!("property double {n}\n");
+        }
+        s += "end_header\n1 2 3";
+        for v in vals
+            .iter()
+            .chain(&[0.5, -1.0, -2.0, -3.0, 1.0, 0.0, 0.0, 0.0])
+        {
+            s += &format!(" {v}");
+        }
+        std::fs::write(path, s + "\n").unwrap();
+    }
+
+    /// The stored-field gradient of L = sum_k w_k f_k (f = features as read) against exact
+    /// differences of L through `read_ply` (the read is linear in the stored features), for
+    /// 3 channels, 1 channel, and more rest coefficients than the model keeps.
+    #[test]
+    fn stored_grads_are_the_gradient_of_the_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("g.ply");
+        let w: Vec<f64> = (0..N_FEATURES).map(|k| 0.5 + 0.25 * k as f64).collect();
+        let loss =
+            |g: &Gaussians<f64>| -> f64 { g.features[0].iter().zip(&w).map(|(a, b)| a * b).sum() };
+        for (ch, k) in [(3, 3), (1, 15), (3, 15), (2, 20)] {
+            let base: Vec<f64> = (0..ch + ch * k).map(|j| 0.125 * j as f64 - 1.0).collect();
+            ascii_ply(&p, ch, k, &base);
+            let (g0, layout): (Gaussians<f64>, _) = read_ply_with_layout(&p).unwrap();
+            assert_eq!(
+                layout,
+                FeatureLayout {
+                    channels: ch,
+                    rest_per_channel: k
+                }
+            );
+            let mut d = Gaussians::<f64>::zeros(1);
+            d.features[0].copy_from_slice(&w);
+            let sg = StoredGrads::new(&d, layout);
+            assert_eq!(sg.features.dim(), (1, ch + ch * k));
+            for j in 0..base.len() {
+                let mut v = base.clone();
+                v[j] += 1.0;
+                ascii_ply(&p, ch, k, &v);
+                let fd = loss(&read_ply(&p).unwrap()) - loss(&g0);
+                assert!(
+                    (sg.features[[0, j]] - fd).abs() < 1e-12,
+                    "{ch} {k} {j}: {} vs {fd}",
+                    sg.features[[0, j]]
+                );
+            }
+        }
     }
 }

@@ -9,14 +9,42 @@
 //!
 //! lambda = the 16 real-SH normalisation constants with the signs of 3DGS's SH evaluation and
 //! the direction terms dropped: (C0, -C1, C1, -C1, C2[0..5], C3[0..7]). The constants are the
-//! full-precision values of 3DGS `auxiliary.h` (research quotes them rounded to 8 digits).
+//! full-precision values of 3DGS `cuda_rasterizer/auxiliary.h` (a test checks the 8-digit
+//! values of X-Gaussian's copy).
 //! Only the first `active` features (1, 4, 9 or 16: SH degree 0..3, progressive enabling)
 //! take part; the others get zero gradient.
 
 #![allow(clippy::needless_range_loop)] // small fixed-size matrix loops read best indexed
 
+use serde::{Deserialize, Serialize};
+
 use crate::gaussians::model::N_FEATURES;
 use crate::real::Real;
+
+/// How a Gaussian's intensity is computed from its 16 features.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ColorMode {
+    /// The paper's Eq. (2): i = Sigmoid(sum_k lambda_k f_k).
+    #[default]
+    RirfPaper,
+    /// X-Gaussian's code: i = max(0, 0.5 + sum_k lambda_k f_k).
+    RirfXgaussian,
+    /// View-dependent SH colour (3DGS baseline): i = max(0, 0.5 + SH(dir) . f), dir from the
+    /// camera centre to the mean.
+    Sh,
+}
+
+impl ColorMode {
+    /// The name used in files and on the command line (`rirf-paper`, `rirf-xgaussian`, `sh`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ColorMode::RirfPaper => "rirf-paper",
+            ColorMode::RirfXgaussian => "rirf-xgaussian",
+            ColorMode::Sh => "sh",
+        }
+    }
+}
 
 /// Real SH constant of degree 0, 1 / (2 sqrt(pi)).
 pub const SH_C0: f64 = 0.282_094_791_773_878_14;
@@ -199,6 +227,17 @@ mod tests {
     use super::*;
     use crate::math::fd;
 
+    #[test]
+    fn color_mode_names_are_the_serde_names() {
+        for c in [
+            ColorMode::RirfPaper,
+            ColorMode::RirfXgaussian,
+            ColorMode::Sh,
+        ] {
+            assert_eq!(serde_json::to_value(c).unwrap(), c.name());
+        }
+    }
+
     fn feats(seed: u64) -> [f64; N_FEATURES] {
         let mut s = seed;
         std::array::from_fn(|_| {
@@ -210,8 +249,8 @@ mod tests {
     }
 
     #[test]
-    fn lambda_matches_research_constants() {
-        // research/xgaussian_unispine.md (8 digits).
+    fn lambda_matches_xgaussian_constants() {
+        // X-Gaussian `cuda_rasterizer/auxiliary.h` (caiyuanhao1998/X-Gaussian), to 8 digits.
         let want = [
             0.28209479,
             -0.48860251,

@@ -201,9 +201,9 @@ impl<R: Real> Adam<R> {
         group_step(kd, pf, mf, vf, &grad.features, 0..1);
         let kf = &k[Group::FRest as usize];
         group_step(kf, pf, mf, vf, &grad.features, 1..N_FEATURES);
-        for g in 0..N_GROUPS {
-            if active[g] {
-                self.steps[g] += 1;
+        for (steps, &on) in self.steps.iter_mut().zip(active) {
+            if on {
+                *steps += 1;
             }
         }
     }

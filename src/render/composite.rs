@@ -41,10 +41,15 @@
 
 use rayon::prelude::*;
 
+use super::lanes::{exp_k, mask, power_of, sel};
 use super::tiles::{self, TileBins, TILE};
 use super::{SplatGrads, Splats};
 use crate::image2d::Image2d;
 use crate::real::Real;
+use crate::simd::Simd;
+
+mod naive;
+pub use naive::naive_forward;
 
 /// Eq. (4) opacity clamp (3DGS; gsplat since 2026).
 pub const ALPHA_MAX: f64 = 0.99;
@@ -57,6 +62,15 @@ const BOX_LOG_MARGIN: f64 = 1e-3;
 
 /// Pixels per tile.
 const TP: usize = TILE * TILE;
+
+/// Floating-point operations (adds, multiplies, divisions, compares and min/selects on floats)
+/// per pixel lane of the forward kernel, counted from its source, without the ones that are
+/// the same for a whole tile row (hoisted out of the lane loop): dx and Eq. (4)'s exponent 8, `exp_f32`
+/// 24, opacity and clamp 2, transmittance 2, three tests 3, Eq. (5)'s colour 3.
+pub const FLOPS_PER_BLEND_FORWARD: u64 = 42;
+/// The same count for the backward kernel: dx, exponent, exp and alpha 34, three tests 3, T recovery 3,
+/// dL/dalpha 8, the two running sums 6, d(power) and the six gradient lanes 20.
+pub const FLOPS_PER_BLEND_BACKWARD: u64 = 74;
 
 /// What [`backward`] needs from [`forward`].
 #[derive(Clone, Debug, Default)]
@@ -265,73 +279,6 @@ fn half_bits([h0, h1]: [bool; 2], r: usize) -> u32 {
     ((h0 as u32) << (2 * r)) | ((h1 as u32) << (2 * r + 1))
 }
 
-/// exp in the kernels: for f32 a branch-free polynomial ([`exp_f32`], vectorisable, within
-/// 2 ulp of exp), for f64 the standard library's exp. Forward, backward and the naive reference
-/// all call this, so their decisions agree bit for bit.
-#[inline(always)]
-pub fn exp_k<R: Real>(x: R) -> R {
-    if std::any::TypeId::of::<R>() == std::any::TypeId::of::<f32>() {
-        // Exact round trip f32 -> f64 -> f32.
-        R::c(exp_f32(x.f64() as f32) as f64)
-    } else {
-        x.exp()
-    }
-}
-
-/// exp(x) for f32 without branches or library calls (so that loops over pixels vectorise):
-/// x clamped to [-87, 88], x = n ln2 + r with |r| <= ln2/2 (Cody-Waite, two-part ln2), exp(r)
-/// by its degree-7 Taylor polynomial (truncation < 6e-9 relative), times 2^n built from the
-/// exponent bits. Measured against f64 exp: max relative error 9.3e-8 on [-87, 0] (`exp_f32_is_within_2e_7_of_exp`).
-#[inline(always)]
-pub fn exp_f32(x: f32) -> f32 {
-    const LOG2E: f32 = std::f32::consts::LOG2_E;
-    const LN2_HI: f32 = 0.693_145_75;
-    const LN2_LO: f32 = 1.428_606_8e-6;
-    const MAGIC: f32 = 12_582_912.0; // 1.5 * 2^23: adding it rounds to an integer
-    let x = if x < -87.0 { -87.0 } else { x };
-    let x = if x > 88.0 { 88.0 } else { x };
-    let t = x * LOG2E + MAGIC;
-    let n = t - MAGIC;
-    // n as an integer: the low mantissa bits of t.
-    let ni = t.to_bits().wrapping_sub(MAGIC.to_bits());
-    let r = (x - n * LN2_HI) - n * LN2_LO;
-    let p = 1.0
-        + r * (1.0
-            + r * (0.5
-                + r * (1.0 / 6.0
-                    + r * (1.0 / 24.0
-                        + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
-    let scale = f32::from_bits(ni.wrapping_add(127) << 23);
-    p * scale
-}
-
-/// All-ones if `b`, else 0.
-#[inline(always)]
-fn mask(b: bool) -> u32 {
-    0u32.wrapping_sub(b as u32)
-}
-
-/// `m ? a : b` for a mask from [`mask`]. For f32 a bit select (so that the pixel loops
-/// vectorise without masked stores), for f64 a plain select; both exact.
-#[inline(always)]
-fn sel<R: Real>(m: u32, a: R, b: R) -> R {
-    if std::any::TypeId::of::<R>() == std::any::TypeId::of::<f32>() {
-        let (a, b) = (a.f64() as f32, b.f64() as f32);
-        R::c(f32::from_bits((a.to_bits() & m) | (b.to_bits() & !m)) as f64)
-    } else if m != 0 {
-        a
-    } else {
-        b
-    }
-}
-
-/// power = -0.5 (A dx^2 + C dy^2) - B dx dy, the exponent of G (one expression shared by all
-/// passes so that their skip decisions agree bit for bit).
-#[inline(always)]
-fn power_of<R: Real>(a: R, b: R, c: R, dx: R, dy: R) -> R {
-    -R::c(0.5) * (a * dx * dx + c * dy * dy) - b * dx * dy
-}
-
 /// Per-tile forward result: colour (without background), final T, n_contrib, tile-local, and
 /// the prefix of the work list up to the largest n_contrib (what the backward visits).
 struct TileOut<R> {
@@ -342,8 +289,18 @@ struct TileOut<R> {
     work: Vec<Entry<R>>,
 }
 
+/// The forward kernel of tile `t`, `W` pixels per lane vector (8: one 8-column half of a tile
+/// row, the AVX2 width; 16: a whole tile row, the AVX-512 width). Both widths do the same IEEE
+/// operations per pixel and give the same bits: a vector covering a half the chord test ruled
+/// out masks that half's lanes (they would fail `alpha >= 1/255`), one covering a done half
+/// masks it through `done`.
 #[inline(always)]
-fn forward_tile<R: Real>(packed: &[Option<Packed<R>>], bins: &TileBins, t: usize) -> TileOut<R> {
+fn forward_tile<R: Real, const W: usize>(
+    packed: &[Option<Packed<R>>],
+    bins: &TileBins,
+    t: usize,
+) -> TileOut<R> {
+    const { assert!(W == 8 || W == 16) };
     let [x0, x1, y0, y1] = bins.pixel_rect(t);
     let npix = ((x1 - x0) * (y1 - y0)) as u32;
     let mut out = TileOut {
@@ -392,30 +349,38 @@ fn forward_tile<R: Real>(packed: &[Option<Packed<R>>], bins: &TileBins, t: usize
             let base = (row - y0) * TILE;
             let hv = halves(chord, row, x0);
             bits |= half_bits(hv, row - y0);
-            for h in 0..2 {
-                if !hv[h] || hd[h] == half_len[h] {
+            let go = [hv[0] && hd[0] != half_len[0], hv[1] && hd[1] != half_len[1]];
+            for v in 0..TILE / W {
+                let (c0, h0) = (v * W, v * W / 8);
+                if !go[h0..h0 + W / 8].iter().any(|&g| g) {
                     continue;
                 }
+                // Lanes in the entry's box and in a half that meets the chord (with 8 lanes
+                // the half is visited only when it meets it).
+                let act: [u32; W] = if W == 8 {
+                    colm[c0..c0 + W].try_into().unwrap()
+                } else {
+                    std::array::from_fn(|k| colm[c0 + k] & mask(hv[(c0 + k) / 8]))
+                };
                 let mut nb = 0u32;
                 let mut nd = 0u32;
-                let o8 = base + 8 * h;
-                let tr: &mut [R; 8] = (&mut out.t[o8..o8 + 8]).try_into().unwrap();
-                let cr: &mut [R; 8] = (&mut out.color[o8..o8 + 8]).try_into().unwrap();
-                let lr: &mut [u32; 8] = (&mut out.last[o8..o8 + 8]).try_into().unwrap();
-                let dr: &mut [u32; 8] = (&mut done[o8..o8 + 8]).try_into().unwrap();
-                let xh: &[R; 8] = xs[8 * h..8 * h + 8].try_into().unwrap();
-                let ch: &[u32; 8] = colm[8 * h..8 * h + 8].try_into().unwrap();
-                // Branch-free over the 8 columns (vectorises; columns outside the entry's box
-                // are masked out); selects reproduce the sequential skip / stop / blend logic
-                // exactly.
-                for k in 0..8 {
+                let mut stops = [0u32; W];
+                let o = base + c0;
+                let tr: &mut [R; W] = (&mut out.t[o..o + W]).try_into().unwrap();
+                let cr: &mut [R; W] = (&mut out.color[o..o + W]).try_into().unwrap();
+                let lr: &mut [u32; W] = (&mut out.last[o..o + W]).try_into().unwrap();
+                let dr: &mut [u32; W] = (&mut done[o..o + W]).try_into().unwrap();
+                let xh: &[R; W] = xs[c0..c0 + W].try_into().unwrap();
+                // Branch-free over the W columns (vectorises; masked-out columns keep their
+                // values); selects reproduce the sequential skip / stop / blend logic exactly.
+                for k in 0..W {
                     let dx = xh[k] - e.mx;
                     let pw = power_of(e.a, e.b, e.c, dx, dy);
                     let og = e.o * exp_k(pw);
                     let alpha = sel(mask(og > amax), amax, og);
                     let tt = tr[k];
                     let next = tt * (one - alpha);
-                    let valid = ch[k] & !dr[k] & mask(pw <= R::zero()) & mask(alpha >= amin);
+                    let valid = act[k] & !dr[k] & mask(pw <= R::zero()) & mask(alpha >= amin);
                     let stop = valid & mask(next < tmin);
                     let blend = valid & !stop;
                     let c_new = cr[k] + e.col * alpha * tt;
@@ -424,11 +389,23 @@ fn forward_tile<R: Real>(packed: &[Option<Packed<R>>], bins: &TileBins, t: usize
                     lr[k] = (tag & blend) | (lr[k] & !blend);
                     dr[k] |= stop;
                     nb += blend & 1;
-                    nd += stop & 1;
+                    if W == 8 {
+                        nd += stop & 1;
+                    } else {
+                        stops[k] = stop & 1;
+                    }
                 }
                 out.blends += nb as u64;
-                n_done += nd;
-                hd[h] += nd;
+                if W == 8 {
+                    n_done += nd;
+                    hd[h0] += nd;
+                } else {
+                    for (h, s) in stops.chunks_exact(8).enumerate() {
+                        let nd: u32 = s.iter().sum();
+                        n_done += nd;
+                        hd[h0 + h] += nd;
+                    }
+                }
             }
         }
         e.halves = bits;
@@ -449,11 +426,33 @@ pub fn forward<R: Real>(
     height: usize,
     background: R,
 ) -> (Image2d<R>, CompositeSaved<R>) {
+    forward_with(Simd::active(), splats, width, height, background)
+}
+
+/// [`forward`] with the tile kernels compiled for `simd` (or, when the CPU lacks it, for the
+/// widest supported narrower set). Every path gives the same bits.
+pub fn forward_with<R: Real>(
+    simd: Simd,
+    splats: &Splats<R>,
+    width: usize,
+    height: usize,
+    background: R,
+) -> (Image2d<R>, CompositeSaved<R>) {
+    forward_kernel(Kernel::of(simd), splats, width, height, background)
+}
+
+pub(crate) fn forward_kernel<R: Real>(
+    kernel: Kernel,
+    splats: &Splats<R>,
+    width: usize,
+    height: usize,
+    background: R,
+) -> (Image2d<R>, CompositeSaved<R>) {
     let bins = tiles::bin(splats, width, height);
     let packed = pack(splats, &bins);
     let mut outs: Vec<TileOut<R>> = (0..bins.n_tiles())
         .into_par_iter()
-        .map(|t| dispatch::forward_tile(&packed, &bins, t))
+        .map(|t| dispatch::forward_tile(kernel, &packed, &bins, t))
         .collect();
     let work = WorkLists {
         tiles: outs
@@ -518,71 +517,138 @@ pub fn validate<R: Real>(splats: &Splats<R>) -> crate::error::Result<()> {
     Ok(())
 }
 
-/// The tile kernels compiled twice: for the baseline target and, on x86-64 CPUs that have it,
-/// with AVX2 enabled (8-wide vectors), chosen at run time. FMA is not enabled, so both
-/// versions perform the same IEEE operations and give the same bits.
+/// Which compiled tile kernel runs: the instruction set and the lane width (8 or 16 pixels).
+/// Every combination gives the same bits; [`Kernel::of`] picks the natural width of a set.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Kernel {
+    pub simd: Simd,
+    pub wide: bool,
+}
+
+impl Kernel {
+    /// The kernel of `simd` (or of the widest supported narrower set): 16 lanes with AVX-512,
+    /// 8 otherwise.
+    pub fn of(simd: Simd) -> Kernel {
+        let simd = simd.or_narrower();
+        Kernel {
+            simd,
+            wide: simd == Simd::Avx512,
+        }
+    }
+}
+
+/// The tile kernels compiled for each instruction set ([`Simd`]) and chosen at run time: the
+/// baseline target with 8 lanes, AVX2 with 8 or 16 lanes, AVX-512 with 16 lanes. No version
+/// enables floating-point contraction (Rust never fuses a multiply and an add by itself), so
+/// all perform the same IEEE operations per pixel and give the same bits.
 mod dispatch {
     use super::*;
 
     pub(super) fn forward_tile<R: Real>(
+        k: Kernel,
         s: &[Option<Packed<R>>],
         bins: &TileBins,
         t: usize,
     ) -> TileOut<R> {
         #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked above).
-            return unsafe { forward_tile_avx2(s, bins, t) };
+        match k.simd {
+            // SAFETY: the CPU supports the instruction set (checked by `supported`).
+            Simd::Avx512 if Simd::Avx512.supported() => {
+                return unsafe { forward_tile_avx512(s, bins, t) };
+            }
+            Simd::Avx2 if k.wide && Simd::Avx2.supported() => {
+                return unsafe { forward_tile_avx2::<R, 16>(s, bins, t) };
+            }
+            Simd::Avx2 if Simd::Avx2.supported() => {
+                return unsafe { forward_tile_avx2::<R, 8>(s, bins, t) };
+            }
+            _ => {}
         }
-        super::forward_tile(s, bins, t)
+        let _ = k;
+        super::forward_tile::<R, 8>(s, bins, t)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn forward_tile_avx2<R: Real>(
+    unsafe fn forward_tile_avx2<R: Real, const W: usize>(
         s: &[Option<Packed<R>>],
         bins: &TileBins,
         t: usize,
     ) -> TileOut<R> {
-        super::forward_tile(s, bins, t)
+        super::forward_tile::<R, W>(s, bins, t)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
+    unsafe fn forward_tile_avx512<R: Real>(
+        s: &[Option<Packed<R>>],
+        bins: &TileBins,
+        t: usize,
+    ) -> TileOut<R> {
+        super::forward_tile::<R, 16>(s, bins, t)
     }
 
     pub(super) fn backward_tile<R: Real>(
+        k: Kernel,
         s: &[Option<Packed<R>>],
         saved: &CompositeSaved<R>,
         d_image: &Image2d<R>,
         t: usize,
     ) -> Vec<Rec<R>> {
         #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked above).
-            return unsafe { backward_tile_avx2(s, saved, d_image, t) };
+        match k.simd {
+            // SAFETY: the CPU supports the instruction set (checked by `supported`).
+            Simd::Avx512 if Simd::Avx512.supported() => {
+                return unsafe { backward_tile_avx512(s, saved, d_image, t) };
+            }
+            Simd::Avx2 if k.wide && Simd::Avx2.supported() => {
+                return unsafe { backward_tile_avx2::<R, 16>(s, saved, d_image, t) };
+            }
+            Simd::Avx2 if Simd::Avx2.supported() => {
+                return unsafe { backward_tile_avx2::<R, 8>(s, saved, d_image, t) };
+            }
+            _ => {}
         }
-        super::backward_tile(s, saved, d_image, t)
+        let _ = k;
+        super::backward_tile::<R, 8>(s, saved, d_image, t)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn backward_tile_avx2<R: Real>(
+    unsafe fn backward_tile_avx2<R: Real, const W: usize>(
         s: &[Option<Packed<R>>],
         saved: &CompositeSaved<R>,
         d_image: &Image2d<R>,
         t: usize,
     ) -> Vec<Rec<R>> {
-        super::backward_tile(s, saved, d_image, t)
+        super::backward_tile::<R, W>(s, saved, d_image, t)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
+    unsafe fn backward_tile_avx512<R: Real>(
+        s: &[Option<Packed<R>>],
+        saved: &CompositeSaved<R>,
+        d_image: &Image2d<R>,
+        t: usize,
+    ) -> Vec<Rec<R>> {
+        super::backward_tile::<R, 16>(s, saved, d_image, t)
     }
 }
 
 /// Gradient record of one work-list entry: (mean x, mean y, A, B, C, opacity, colour).
 type Rec<R> = (u32, [R; 7]);
 
+/// The backward kernel of tile `t`, `W` pixels per lane vector (see [`forward_tile`]; both
+/// widths give the same bits: per column, the rows are summed in the same order).
 #[inline(always)]
-fn backward_tile<R: Real>(
+fn backward_tile<R: Real, const W: usize>(
     packed: &[Option<Packed<R>>],
     saved: &CompositeSaved<R>,
     d_image: &Image2d<R>,
     t: usize,
 ) -> Vec<Rec<R>> {
+    const { assert!(W == 8 || W == 16) };
     let bins = &saved.bins;
     let width = bins.width;
     let [x0, x1, y0, y1] = bins.pixel_rect(t);
@@ -643,33 +709,38 @@ fn backward_tile<R: Real>(
             let base = (row - y0) * TILE;
             let r2 = 2 * (row - y0);
             let hv = [e.halves >> r2 & 1 != 0, e.halves >> (r2 + 1) & 1 != 0];
-            for h in 0..2 {
-                if !hv[h] {
+            for v in 0..TILE / W {
+                let (c0, h0) = (v * W, v * W / 8);
+                if !hv[h0..h0 + W / 8].iter().any(|&h| h) {
                     continue;
                 }
-                let r = base + 8 * h..base + 8 * h + 8;
-                let tc: &mut [R; 8] = (&mut tcur[r.clone()]).try_into().unwrap();
-                let tf: &[R; 8] = (&tfin[r.clone()]).try_into().unwrap();
-                let bh: &mut [R; 8] = (&mut behind[r.clone()]).try_into().unwrap();
-                let gr: &[R; 8] = (&g[r.clone()]).try_into().unwrap();
-                let lr: &[u32; 8] = (&last[r]).try_into().unwrap();
-                let xh: &[R; 8] = xs[8 * h..8 * h + 8].try_into().unwrap();
-                let ch: &[u32; 8] = colm[8 * h..8 * h + 8].try_into().unwrap();
+                let act: [u32; W] = if W == 8 {
+                    colm[c0..c0 + W].try_into().unwrap()
+                } else {
+                    std::array::from_fn(|k| colm[c0 + k] & mask(hv[(c0 + k) / 8]))
+                };
+                let r = base + c0..base + c0 + W;
+                let tc: &mut [R; W] = (&mut tcur[r.clone()]).try_into().unwrap();
+                let tf: &[R; W] = (&tfin[r.clone()]).try_into().unwrap();
+                let bh: &mut [R; W] = (&mut behind[r.clone()]).try_into().unwrap();
+                let gr: &[R; W] = (&g[r.clone()]).try_into().unwrap();
+                let lr: &[u32; W] = (&last[r]).try_into().unwrap();
+                let xh: &[R; W] = xs[c0..c0 + W].try_into().unwrap();
                 let [l0, l1, l2, l3, l4, l5, l6] = &mut lanes;
-                let l0: &mut [R; 8] = (&mut l0[8 * h..8 * h + 8]).try_into().unwrap();
-                let l1: &mut [R; 8] = (&mut l1[8 * h..8 * h + 8]).try_into().unwrap();
-                let l2: &mut [R; 8] = (&mut l2[8 * h..8 * h + 8]).try_into().unwrap();
-                let l3: &mut [R; 8] = (&mut l3[8 * h..8 * h + 8]).try_into().unwrap();
-                let l4: &mut [R; 8] = (&mut l4[8 * h..8 * h + 8]).try_into().unwrap();
-                let l5: &mut [R; 8] = (&mut l5[8 * h..8 * h + 8]).try_into().unwrap();
-                let l6: &mut [R; 8] = (&mut l6[8 * h..8 * h + 8]).try_into().unwrap();
-                for k in 0..8 {
+                let l0: &mut [R; W] = (&mut l0[c0..c0 + W]).try_into().unwrap();
+                let l1: &mut [R; W] = (&mut l1[c0..c0 + W]).try_into().unwrap();
+                let l2: &mut [R; W] = (&mut l2[c0..c0 + W]).try_into().unwrap();
+                let l3: &mut [R; W] = (&mut l3[c0..c0 + W]).try_into().unwrap();
+                let l4: &mut [R; W] = (&mut l4[c0..c0 + W]).try_into().unwrap();
+                let l5: &mut [R; W] = (&mut l5[c0..c0 + W]).try_into().unwrap();
+                let l6: &mut [R; W] = (&mut l6[c0..c0 + W]).try_into().unwrap();
+                for k in 0..W {
                     let dx = xh[k] - e.mx;
                     let pw = power_of(e.a, e.b, e.c, dx, dy);
                     let gk = exp_k(pw);
                     let og = e.o * gk;
                     let alpha = sel(mask(og > amax), amax, og);
-                    let valid = ch[k] & mask(ju < lr[k]) & mask(pw <= zero) & mask(alpha >= amin);
+                    let valid = act[k] & mask(ju < lr[k]) & mask(pw <= zero) & mask(alpha >= amin);
                     let inv = one / (one - alpha);
                     let tk = tc[k] * inv;
                     let gp = gr[k];
@@ -711,6 +782,25 @@ pub fn backward<R: Real>(
     saved: &CompositeSaved<R>,
     d_image: &Image2d<R>,
 ) -> SplatGrads<R> {
+    backward_with(Simd::active(), splats, saved, d_image)
+}
+
+/// [`backward`] with the tile kernels compiled for `simd` (see [`forward_with`]).
+pub fn backward_with<R: Real>(
+    simd: Simd,
+    splats: &Splats<R>,
+    saved: &CompositeSaved<R>,
+    d_image: &Image2d<R>,
+) -> SplatGrads<R> {
+    backward_kernel(Kernel::of(simd), splats, saved, d_image)
+}
+
+pub(crate) fn backward_kernel<R: Real>(
+    kernel: Kernel,
+    splats: &Splats<R>,
+    saved: &CompositeSaved<R>,
+    d_image: &Image2d<R>,
+) -> SplatGrads<R> {
     let n = splats.mean2d.len();
     assert_eq!(
         (d_image.width, d_image.height),
@@ -725,7 +815,7 @@ pub fn backward<R: Real>(
     };
     let recs: Vec<Vec<Rec<R>>> = (0..saved.bins.n_tiles())
         .into_par_iter()
-        .map(|t| dispatch::backward_tile(&packed, saved, d_image, t))
+        .map(|t| dispatch::backward_tile(kernel, &packed, saved, d_image, t))
         .collect();
     let mut out = SplatGrads {
         mean2d: vec![[R::zero(); 2]; n],
@@ -747,69 +837,6 @@ pub fn backward<R: Real>(
         }
     }
     out
-}
-
-/// Naive reference of [`forward`] (no tile lists, no pixel boxes, no early tile exit): for every
-/// pixel, every drawn splat whose tile rectangle holds the pixel's tile, in (depth, index)
-/// order. Same arithmetic per pixel, so it agrees with [`forward`] bit for bit; used by the tests
-/// and as the per-blend baseline of `unispine bench render`. Single-threaded, O(pixels x splats).
-pub fn naive_forward<R: Real>(
-    splats: &Splats<R>,
-    width: usize,
-    height: usize,
-    background: R,
-) -> Image2d<R> {
-    let n = splats.radius.len();
-    let (tx, ty) = (width.div_ceil(TILE), height.div_ceil(TILE));
-    let mut order: Vec<(u64, u32, [usize; 4])> = (0..n)
-        .filter(|&i| tiles::drawn(splats, i))
-        .filter_map(|i| {
-            let [u, v] = splats.mean2d[i].map(|x| x.f64());
-            tiles::tile_rect(u, v, splats.radius[i], tx, ty).map(|r| {
-                (
-                    tiles::sort_key(splats.depth[i].f64(), i as u32),
-                    i as u32,
-                    r,
-                )
-            })
-        })
-        .collect();
-    order.sort_unstable();
-    let (amax, amin, tmin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN), R::c(T_MIN));
-    let half = R::c(0.5);
-    let mut img = Image2d::filled(width, height, R::zero());
-    for row in 0..height {
-        for col in 0..width {
-            let (ptx, pty) = (col / TILE, row / TILE);
-            let (mut c, mut t) = (R::zero(), R::one());
-            for &(_, i, r) in &order {
-                if !(r[0] <= ptx && ptx < r[1] && r[2] <= pty && pty < r[3]) {
-                    continue;
-                }
-                let i = i as usize;
-                let dx = R::c(col as f64) + half - splats.mean2d[i][0];
-                let dy = R::c(row as f64) + half - splats.mean2d[i][1];
-                let [a, b, cc] = splats.conic[i];
-                let pw = power_of(a, b, cc, dx, dy);
-                if pw > R::zero() {
-                    continue;
-                }
-                let og = splats.opacity[i] * exp_k(pw);
-                let alpha = if og > amax { amax } else { og };
-                if alpha < amin {
-                    continue;
-                }
-                let next = t * (R::one() - alpha);
-                if next < tmin {
-                    break;
-                }
-                c += splats.color[i] * alpha * t;
-                t = next;
-            }
-            img.data[row * width + col] = c + t * background;
-        }
-    }
-    img
 }
 
 #[cfg(test)]

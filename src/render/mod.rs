@@ -10,6 +10,7 @@
 //! used by densification.
 
 pub mod composite;
+pub mod lanes;
 pub mod project;
 pub mod tiles;
 
@@ -17,19 +18,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::real::Real;
 
-/// How a Gaussian's intensity is computed from its 16 features.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum ColorMode {
-    /// The paper's Eq. (2): i = Sigmoid(sum_k lambda_k f_k).
-    #[default]
-    RirfPaper,
-    /// X-Gaussian's code: i = max(0, 0.5 + sum_k lambda_k f_k).
-    RirfXgaussian,
-    /// View-dependent SH colour (3DGS baseline): i = max(0, 0.5 + SH(dir) . f), dir from the
-    /// camera centre to the mean.
-    Sh,
-}
+/// The intensity model lives with Eq. (2) in [`crate::gaussians::rirf`].
+pub use crate::gaussians::rirf::ColorMode;
 
 /// Rasterizer settings that are not part of the scene.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -49,6 +39,61 @@ impl Default for RenderSettings {
             active_features: 16,
             background: 0.0,
         }
+    }
+}
+
+/// Start of the PLY header comment that records how a model is rendered (see
+/// [`RenderSettings::to_ply_comment`]).
+pub const PLY_RENDER_COMMENT: &str = "unispine-render ";
+
+impl RenderSettings {
+    /// The PLY header comment that records these settings: `unispine-render ` followed by the
+    /// settings as one-line JSON, e.g.
+    /// `unispine-render {"color":"rirf-xgaussian","active_features":16,"background":0.0}`.
+    /// Models written by `unispine train` carry it; `unispine render` and `unispine eval` use it.
+    pub fn to_ply_comment(&self) -> String {
+        format!(
+            "{PLY_RENDER_COMMENT}{}",
+            serde_json::to_string(self).expect("render settings serialise")
+        )
+    }
+
+    /// The settings recorded in PLY header comments (`None` when no comment records them, as in
+    /// PLYs from other tools). A malformed record is an error naming `path`.
+    pub fn from_ply_comments(
+        path: &std::path::Path,
+        comments: &[String],
+    ) -> crate::error::Result<Option<Self>> {
+        let Some(c) = comments
+            .iter()
+            .find_map(|c| c.strip_prefix(PLY_RENDER_COMMENT))
+        else {
+            return Ok(None);
+        };
+        let s: RenderSettings = serde_json::from_str(c).map_err(|e| {
+            crate::error::Error::format(path, "comment unispine-render", e.to_string())
+        })?;
+        s.validate().map_err(|e| {
+            crate::error::Error::format(path, "comment unispine-render", e.to_string())
+        })?;
+        Ok(Some(s))
+    }
+
+    /// Error unless `active_features` is 1, 4, 9 or 16 and the background is finite.
+    pub fn validate(&self) -> crate::error::Result<()> {
+        if !crate::gaussians::rirf::valid_active(self.active_features) {
+            return Err(crate::error::Error::invalid(
+                "active_features",
+                format!("must be 1, 4, 9 or 16, got {}", self.active_features),
+            ));
+        }
+        if !self.background.is_finite() {
+            return Err(crate::error::Error::invalid(
+                "background",
+                format!("must be finite, got {}", self.background),
+            ));
+        }
+        Ok(())
     }
 }
 

@@ -1,19 +1,28 @@
 //! Reports: markdown tables and SVG charts read from run folders (`metrics.json`, `log.csv`),
 //! so that reports never recompute anything.
 
+pub mod reproduce;
 pub mod svg;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
-use crate::train::Metrics;
+use crate::train::{Metrics, RunDir};
 
-/// Read a run's `metrics.json`.
+/// Read a run's `metrics.json` (through [`RunDir`]).
 pub fn read_metrics(run: &Path) -> Result<Metrics> {
-    let p = run.join("metrics.json");
-    let s = std::fs::read_to_string(&p).map_err(|e| Error::io(&p, e))?;
-    serde_json::from_str(&s).map_err(|e| Error::format(&p, "metrics", e.to_string()))
+    RunDir::open(run)?.read_metrics()
+}
+
+/// `metrics.json` of a run, `None` when the folder exists but has none (a run still going, or
+/// one that failed); other errors (unreadable or malformed file, missing folder) are errors.
+fn try_metrics(run: &Path) -> Result<Option<Metrics>> {
+    let rd = RunDir::open(run)?;
+    if !rd.path(crate::train::run_dir::METRICS).exists() {
+        return Ok(None);
+    }
+    rd.read_metrics().map(Some)
 }
 
 fn opt(v: Option<f64>, prec: usize) -> String {
@@ -24,18 +33,26 @@ fn opt(v: Option<f64>, prec: usize) -> String {
 }
 
 /// A markdown table with one row per run: method, iterations, test PSNR / SSIM, train time,
-/// render fps, Gaussian count, peak memory.
+/// render fps, Gaussian count, peak memory. Every figure of a row describes the run's saved
+/// model: a stopped run shows no PSNR / SSIM / fps (its last evaluation was of an earlier
+/// model than the Gaussian count), and a folder without `metrics.json` gets a row that says so.
 pub fn table(runs: &[PathBuf]) -> Result<String> {
     let mut s = String::from(
         "| run | method | iterations | PSNR (dB) | SSIM | train time (s) | fps | Gaussians | peak memory (MiB) |\n\
          |---|---|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in runs {
-        let m = read_metrics(r)?;
         let name = r
             .file_name()
             .map(|x| x.to_string_lossy().to_string())
             .unwrap_or_default();
+        let Some(m) = try_metrics(r)? else {
+            let _ = writeln!(
+                s,
+                "| {name} | no metrics.json (not finished, or failed) | - | - | - | - | - | - | - |"
+            );
+            continue;
+        };
         let _ = writeln!(
             s,
             "| {name} | {} | {}{} | {} | {} | {:.1} | {} | {} | {} |",
@@ -76,7 +93,7 @@ pub fn tradeoff_chart(runs: &[PathBuf]) -> Result<String> {
         ..Default::default()
     };
     for r in runs {
-        let m = read_metrics(r)?;
+        let Some(m) = try_metrics(r)? else { continue };
         let Some(psnr) = m.test_psnr else { continue };
         let colour = match methods.iter().position(|x| *x == m.method) {
             Some(i) => i,
@@ -137,7 +154,7 @@ pub fn read_log(run: &Path) -> Result<Vec<(f64, f64, f64)>> {
 }
 
 /// Moving mean over `w` consecutive values (the first w-1 outputs average what is there).
-fn moving_mean(v: &[f64], w: usize) -> Vec<f64> {
+pub(crate) fn moving_mean(v: &[f64], w: usize) -> Vec<f64> {
     let w = w.max(1);
     let mut out = Vec::with_capacity(v.len());
     let mut sum = 0.0;
@@ -152,7 +169,7 @@ fn moving_mean(v: &[f64], w: usize) -> Vec<f64> {
 }
 
 /// Keep at most `max` points, evenly spaced, always the last one.
-fn thin<T: Copy>(v: &[T], max: usize) -> Vec<T> {
+pub(crate) fn thin<T: Copy>(v: &[T], max: usize) -> Vec<T> {
     let step = v.len().div_ceil(max.max(1)).max(1);
     let mut out: Vec<T> = v.iter().step_by(step).copied().collect();
     if let Some(&last) = v.last() {
@@ -187,7 +204,7 @@ pub fn curves_chart(runs: &[PathBuf]) -> Result<String> {
     };
     for r in runs {
         let label = run_name(r);
-        let m = read_metrics(r)?;
+        let Some(m) = try_metrics(r)? else { continue };
         let log = read_log(r)?;
         let psnr: Vec<f64> = log.iter().map(|x| x.1).collect();
         let smooth = moving_mean(&psnr, log.len().div_ceil(100));

@@ -26,6 +26,31 @@ pub struct Marker {
     pub colour: usize,
 }
 
+/// A shaded band between two curves over the same x values (e.g. mean +- sd over seeds).
+#[derive(Clone, Debug)]
+pub struct Band {
+    /// (x, low, high) triples.
+    pub points: Vec<(f64, f64, f64)>,
+    /// Index into [`PALETTE`].
+    pub colour: usize,
+}
+
+/// Error bars around a point: x and y ranges (equal to the centre for none).
+#[derive(Clone, Debug)]
+pub struct ErrorBar {
+    pub x: (f64, f64),
+    pub y: (f64, f64),
+    pub colour: usize,
+}
+
+/// A small unlabelled dot (e.g. one seed's result beside the labelled mean).
+#[derive(Clone, Debug)]
+pub struct Dot {
+    pub x: f64,
+    pub y: f64,
+    pub colour: usize,
+}
+
 /// One panel: title, axis labels, lines and markers.
 #[derive(Clone, Debug, Default)]
 pub struct Panel {
@@ -33,8 +58,13 @@ pub struct Panel {
     pub x_label: String,
     pub y_label: String,
     pub log_y: bool,
+    /// log10 x axis (non-positive x values are skipped).
+    pub log_x: bool,
     pub lines: Vec<Line>,
     pub markers: Vec<Marker>,
+    pub bands: Vec<Band>,
+    pub error_bars: Vec<ErrorBar>,
+    pub dots: Vec<Dot>,
 }
 
 const PANEL_W: f64 = 520.0;
@@ -100,6 +130,18 @@ fn range(vals: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
 }
 
 impl Panel {
+    fn x_value(&self, x: f64) -> f64 {
+        if self.log_x {
+            if x > 0.0 {
+                x.log10()
+            } else {
+                f64::NAN
+            }
+        } else {
+            x
+        }
+    }
+
     fn y_value(&self, y: f64) -> f64 {
         if self.log_y {
             if y > 0.0 {
@@ -118,12 +160,23 @@ impl Panel {
             .lines
             .iter()
             .flat_map(|l| l.points.iter().map(|p| p.0))
-            .chain(self.markers.iter().map(|m| m.x));
+            .chain(self.markers.iter().map(|m| m.x))
+            .chain(self.bands.iter().flat_map(|b| b.points.iter().map(|p| p.0)))
+            .chain(self.error_bars.iter().flat_map(|e| [e.x.0, e.x.1]))
+            .chain(self.dots.iter().map(|d| d.x))
+            .map(|x| self.x_value(x));
         let ys = self
             .lines
             .iter()
             .flat_map(|l| l.points.iter().map(|p| p.1))
             .chain(self.markers.iter().map(|m| m.y))
+            .chain(
+                self.bands
+                    .iter()
+                    .flat_map(|b| b.points.iter().flat_map(|p| [p.1, p.2])),
+            )
+            .chain(self.error_bars.iter().flat_map(|e| [e.y.0, e.y.1]))
+            .chain(self.dots.iter().map(|d| d.y))
             .map(|y| self.y_value(y));
         Some((range(xs)?, range(ys)?))
     }
@@ -154,7 +207,19 @@ impl Panel {
         };
         let px = |x: f64| x0 + (x - xlo) / (xhi - xlo) * w;
         let py = |y: f64| y0 + h - (y - ylo) / (yhi - ylo) * h;
-        for t in ticks(xlo, xhi, 6) {
+        let xticks = if self.log_x {
+            let t: Vec<f64> = (xlo.ceil() as i64..=xhi.floor() as i64)
+                .map(|k| k as f64)
+                .collect();
+            if t.len() >= 2 {
+                t
+            } else {
+                ticks(xlo, xhi, 5)
+            }
+        } else {
+            ticks(xlo, xhi, 6)
+        };
+        for t in xticks {
             let _ = writeln!(
                 out,
                 r##"<line x1="{0:.1}" y1="{1:.1}" x2="{0:.1}" y2="{2:.1}" stroke="#ddd"/><text x="{0:.1}" y="{3:.1}" font-size="12" text-anchor="middle">{4}</text>"##,
@@ -162,7 +227,11 @@ impl Panel {
                 y0,
                 y0 + h,
                 y0 + h + 16.0,
-                fmt_tick(t)
+                if self.log_x {
+                    fmt_tick(10f64.powf(t))
+                } else {
+                    fmt_tick(t)
+                }
             );
         }
         let yticks = if self.log_y {
@@ -208,10 +277,55 @@ impl Panel {
             y0 + h / 2.0,
             escape(&self.y_label)
         );
+        let pxv = |x: f64| px(self.x_value(x));
+        for b in &self.bands {
+            let c = PALETTE[b.colour % PALETTE.len()];
+            let ok: Vec<(f64, f64, f64)> = b
+                .points
+                .iter()
+                .map(|&(x, l, u)| (self.x_value(x), self.y_value(l), self.y_value(u)))
+                .filter(|p| p.0.is_finite() && p.1.is_finite() && p.2.is_finite())
+                .collect();
+            let mut pts = String::new();
+            for &(x, l, _) in &ok {
+                let _ = write!(pts, "{:.2},{:.2} ", px(x), py(l));
+            }
+            for &(x, _, u) in ok.iter().rev() {
+                let _ = write!(pts, "{:.2},{:.2} ", px(x), py(u));
+            }
+            let _ = writeln!(
+                out,
+                r#"<polygon class="band" points="{}" fill="{c}" fill-opacity="0.18" stroke="none"/>"#,
+                pts.trim_end()
+            );
+        }
+        for e in &self.error_bars {
+            let c = PALETTE[e.colour % PALETTE.len()];
+            let (xa, xb) = (pxv(e.x.0), pxv(e.x.1));
+            let (ya, yb) = (py(self.y_value(e.y.0)), py(self.y_value(e.y.1)));
+            let (xm, ym) = ((xa + xb) / 2.0, (ya + yb) / 2.0);
+            if [xa, xb, ya, yb].iter().all(|v| v.is_finite()) {
+                let _ = writeln!(
+                    out,
+                    r#"<path class="errorbar" d="M{xa:.2},{ym:.2}H{xb:.2}M{xm:.2},{ya:.2}V{yb:.2}" stroke="{c}" stroke-width="1.5"/>"#
+                );
+            }
+        }
+        for d in &self.dots {
+            let (x, y) = (pxv(d.x), py(self.y_value(d.y)));
+            if x.is_finite() && y.is_finite() {
+                let c = PALETTE[d.colour % PALETTE.len()];
+                let _ = writeln!(
+                    out,
+                    r#"<circle cx="{x:.2}" cy="{y:.2}" r="2.5" fill="none" stroke="{c}"/>"#
+                );
+            }
+        }
         for (i, l) in self.lines.iter().enumerate() {
             let c = PALETTE[i % PALETTE.len()];
             let mut pts = String::new();
             for &(x, y) in &l.points {
+                let x = self.x_value(x);
                 let yv = self.y_value(y);
                 if x.is_finite() && yv.is_finite() {
                     let _ = write!(pts, "{:.2},{:.2} ", px(x), py(yv));
@@ -226,6 +340,7 @@ impl Panel {
             // Sparse series (a few evaluation points) also get a dot per point.
             if l.points.len() < 50 {
                 for &(x, y) in &l.points {
+                    let x = self.x_value(x);
                     let yv = self.y_value(y);
                     if x.is_finite() && yv.is_finite() {
                         let _ = writeln!(
@@ -240,23 +355,24 @@ impl Panel {
         }
         for m in &self.markers {
             let yv = self.y_value(m.y);
-            if !(m.x.is_finite() && yv.is_finite()) {
+            let mx = self.x_value(m.x);
+            if !(mx.is_finite() && yv.is_finite()) {
                 continue;
             }
             let c = PALETTE[m.colour % PALETTE.len()];
             let _ = writeln!(
                 out,
                 r#"<circle class="marker" cx="{:.2}" cy="{:.2}" r="5" fill="{c}"><title>{}</title></circle>"#,
-                px(m.x),
+                px(mx),
                 py(yv),
                 escape(&m.label),
             );
             // Label on the side with room: right of the marker in the left half, else left;
             // above it in the lower half, else below.
-            let (lx, anchor) = if px(m.x) < x0 + w / 2.0 {
-                (px(m.x) + 7.0, "start")
+            let (lx, anchor) = if px(mx) < x0 + w / 2.0 {
+                (px(mx) + 7.0, "start")
             } else {
-                (px(m.x) - 7.0, "end")
+                (px(mx) - 7.0, "end")
             };
             let ly = if py(yv) > y0 + h / 2.0 {
                 py(yv) - 7.0

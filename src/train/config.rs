@@ -159,6 +159,10 @@ pub struct TrainConfig {
     /// The SPWM warm-up sees iteration `t * spwm_time_scale` (1; set by `compress_schedule`).
     #[serde(default = "one")]
     pub spwm_time_scale: f64,
+    /// True once [`TrainConfig::compress_schedule`] has scaled the schedules (a saved config
+    /// of such a run must not be compressed again).
+    #[serde(default)]
+    pub schedule_compressed: bool,
     /// Test evaluation at these iterations (upstream [100, 2000, 20000]; the last iteration is
     /// always evaluated).
     pub eval_iterations: Vec<usize>,
@@ -174,6 +178,40 @@ pub struct TrainConfig {
 
 fn one() -> f64 {
     1.0
+}
+
+/// Upper bound on `iterations` (50 x the paper's schedule).
+pub const MAX_ITERATIONS: usize = 1_000_000;
+
+/// Error unless `v` is finite (or an infinite bound allows it) and inside the interval
+/// `lo..hi` (each end open or closed); the message names the field and the interval.
+fn check_range(field: &str, v: f64, lo: (f64, bool), hi: (f64, bool)) -> Result<()> {
+    let above = if lo.1 { v > lo.0 } else { v >= lo.0 };
+    let below = if hi.1 { v < hi.0 } else { v <= hi.0 };
+    if v.is_finite() && above && below {
+        return Ok(());
+    }
+    let end = |x: f64| {
+        if x.is_infinite() {
+            if x > 0.0 {
+                "inf".to_string()
+            } else {
+                "-inf".to_string()
+            }
+        } else {
+            format!("{x}")
+        }
+    };
+    Err(Error::invalid(
+        field,
+        format!(
+            "must be a finite number in {}{}, {}{}, got {v}",
+            if lo.1 { "(" } else { "[" },
+            end(lo.0),
+            end(hi.0),
+            if hi.1 { ")" } else { "]" }
+        ),
+    ))
 }
 
 impl TrainConfig {
@@ -219,6 +257,7 @@ impl TrainConfig {
             },
             spwm,
             spwm_time_scale: 1.0,
+            schedule_compressed: false,
             eval_iterations: vec![100, 2000, 20_000],
             background: 0.0,
             train_views: Some(50),
@@ -229,8 +268,11 @@ impl TrainConfig {
 
     /// Scale every iteration-based schedule (position lr, densification, opacity reset, feature
     /// steps, SPWM warm-up, evaluation points) from the paper's 20000 iterations to
-    /// `self.iterations`, for short runs that still go through every phase.
+    /// `self.iterations`, for short runs that still go through every phase. Scales the paper
+    /// schedule: [`TrainOverrides::apply`] refuses a config already compressed
+    /// (`schedule_compressed`).
     pub fn compress_schedule(&mut self) {
+        self.schedule_compressed = true;
         let f = self.iterations as f64 / PAPER_ITERATIONS as f64;
         let s = |x: usize| ((x as f64 * f).round() as usize).max(1);
         let d = &mut self.densify;
@@ -277,44 +319,190 @@ impl TrainConfig {
         (steps + 1) * (steps + 1)
     }
 
-    /// Check values a run cannot work with; the error names the field.
+    /// Check values a run cannot work with, before iteration 1; the error names the field and
+    /// gives its allowed range.
     pub fn validate(&self) -> Result<()> {
-        if self.iterations == 0 {
-            return Err(Error::invalid("iterations", "must be >= 1"));
+        let inf = f64::INFINITY;
+        // (field, value, low, low open, high, high open)
+        let mut checks: Vec<(&str, f64, f64, bool, f64, bool)> = vec![
+            (
+                "iterations",
+                self.iterations as f64,
+                1.0,
+                false,
+                MAX_ITERATIONS as f64,
+                false,
+            ),
+            (
+                "init.interval",
+                self.init.interval as f64,
+                1.0,
+                false,
+                inf,
+                true,
+            ),
+            ("init.opacity", self.init.opacity, 0.0, true, 1.0, true),
+            ("init.intensity", self.init.intensity, -inf, true, inf, true),
+            // Learning rates: a step of the full scene extent per iteration is the most that
+            // can make sense (upstream 1.6e-4 to 1.9e-4).
+            (
+                "lr.position_init",
+                self.lr.position_init,
+                0.0,
+                true,
+                1.0,
+                false,
+            ),
+            (
+                "lr.position_final",
+                self.lr.position_final,
+                0.0,
+                true,
+                1.0,
+                false,
+            ),
+            (
+                "lr.position_delay_mult",
+                self.lr.position_delay_mult,
+                0.0,
+                true,
+                1.0,
+                false,
+            ),
+            ("lr.feature", self.lr.feature, 0.0, true, 1.0, false),
+            (
+                "lr.feature_rest_div",
+                self.lr.feature_rest_div,
+                0.0,
+                true,
+                1e6,
+                false,
+            ),
+            ("lr.opacity", self.lr.opacity, 0.0, true, 1.0, false),
+            ("lr.scaling", self.lr.scaling, 0.0, true, 1.0, false),
+            ("lr.rotation", self.lr.rotation, 0.0, true, 1.0, false),
+            // beta = 1 never updates the moments and divides by 1 - beta^t = 0; eps = 0 divides
+            // by zero where a gradient is zero.
+            ("adam.beta1", self.adam.beta1, 0.0, false, 1.0, true),
+            ("adam.beta2", self.adam.beta2, 0.0, false, 1.0, true),
+            ("adam.eps", self.adam.eps, 0.0, true, 1.0, false),
+            (
+                "densify.grad_threshold",
+                self.densify.grad_threshold,
+                0.0,
+                false,
+                inf,
+                true,
+            ),
+            (
+                "densify.percent_dense",
+                self.densify.percent_dense,
+                0.0,
+                false,
+                1.0,
+                false,
+            ),
+            (
+                "densify.min_opacity",
+                self.densify.min_opacity,
+                0.0,
+                false,
+                1.0,
+                true,
+            ),
+            (
+                "densify.max_screen_px",
+                self.densify.max_screen_px,
+                0.0,
+                true,
+                inf,
+                true,
+            ),
+            (
+                "densify.max_world_frac",
+                self.densify.max_world_frac,
+                0.0,
+                true,
+                inf,
+                true,
+            ),
+            (
+                "densify.reset_opacity_to",
+                self.densify.reset_opacity_to,
+                0.0,
+                true,
+                1.0,
+                true,
+            ),
+            (
+                "densify.split_scale_div",
+                self.densify.split_scale_div,
+                1.0,
+                false,
+                inf,
+                true,
+            ),
+            (
+                "loss.lambda_dssim",
+                self.loss.lambda_dssim,
+                0.0,
+                false,
+                1.0,
+                false,
+            ),
+            (
+                "loss.charbonnier_eps",
+                self.loss.charbonnier_eps,
+                0.0,
+                true,
+                1.0,
+                false,
+            ),
+            ("loss.delta", self.loss.delta, 0.0, true, 1.0, false),
+            (
+                "spwm_time_scale",
+                self.spwm_time_scale,
+                0.0,
+                true,
+                1e9,
+                false,
+            ),
+            ("background", self.background, -inf, true, inf, true),
+        ];
+        if let Some(m) = self.densify.max_gaussians {
+            checks.push(("densify.max_gaussians", m as f64, 1.0, false, inf, true));
         }
-        if self.init.interval == 0 {
-            return Err(Error::invalid("init.interval", "must be >= 1"));
+        if let Some(v) = self.train_views {
+            checks.push(("train_views", v as f64, 1.0, false, inf, true));
         }
-        for (name, v) in [
-            ("lr.position_init", self.lr.position_init),
-            ("lr.position_final", self.lr.position_final),
-            ("lr.feature", self.lr.feature),
-            ("lr.opacity", self.lr.opacity),
-            ("lr.scaling", self.lr.scaling),
-            ("lr.rotation", self.lr.rotation),
-            ("lr.feature_rest_div", self.lr.feature_rest_div),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(Error::invalid(
-                    name,
-                    format!("must be finite and > 0, got {v}"),
-                ));
-            }
+        if let Some(w) = &self.spwm {
+            checks.extend([
+                ("spwm.alpha", w.alpha, 0.0, false, 1.0, false),
+                ("spwm.hf_lambda", w.hf_lambda, 0.0, false, inf, true),
+                ("spwm.blur_sigma", w.blur_sigma, 0.0, true, 1e3, false),
+                (
+                    "spwm.blur_kernel",
+                    w.blur_kernel as f64,
+                    1.0,
+                    false,
+                    1001.0,
+                    false,
+                ),
+                ("spwm.quantile", w.quantile, 0.0, false, 1.0, false),
+                ("spwm.tau_max", w.tau_max, 0.0, false, 1.0, false),
+                ("spwm.fixed_tau", w.fixed_tau, 0.0, false, 1.0, false),
+                (
+                    "spwm.gate_temperature",
+                    w.gate_temperature,
+                    0.0,
+                    true,
+                    inf,
+                    true,
+                ),
+            ]);
         }
-        if self.loss.data_term == DataTerm::WeightedCharbonnier && self.spwm.is_none() {
-            // Allowed: uniform weights make it the plain Charbonnier mean. Nothing to do.
-        }
-        if !(0.0..=1.0).contains(&self.loss.lambda_dssim) {
-            return Err(Error::invalid("loss.lambda_dssim", "must be in [0, 1]"));
-        }
-        if self.train_views == Some(0) {
-            return Err(Error::invalid("train_views", "must be >= 1"));
-        }
-        if !self.background.is_finite() {
-            return Err(Error::invalid(
-                "background",
-                format!("must be finite, got {}", self.background),
-            ));
+        for (field, v, lo, lo_open, hi, hi_open) in checks {
+            check_range(field, v, (lo, lo_open), (hi, hi_open))?;
         }
         Ok(())
     }
@@ -325,10 +513,9 @@ impl TrainConfig {
         serde_json::from_str(&s).map_err(|e| Error::format(path, "config", e.to_string()))
     }
 
-    /// Write as pretty JSON.
+    /// Write as pretty JSON (atomically).
     pub fn save(&self, path: &Path) -> Result<()> {
-        let s = serde_json::to_string_pretty(self).expect("config serialises");
-        std::fs::write(path, s).map_err(|e| Error::io(path, e))
+        crate::fsio::write_json_atomic(path, self)
     }
 }
 
@@ -425,6 +612,14 @@ impl TrainOverrides {
             c.iterations = n;
         }
         if self.compress_schedule {
+            if c.schedule_compressed {
+                return Err(Error::invalid(
+                    "--compress-schedule",
+                    "the config's schedule is already compressed (it comes from a run made with \
+                     --compress-schedule); compressing it again would shrink every phase twice: \
+                     drop --compress-schedule, or start from the preset",
+                ));
+            }
             c.compress_schedule();
         }
         macro_rules! set {
@@ -484,6 +679,60 @@ mod tests {
         c.lr.opacity = -1.0;
         let e = c.validate().unwrap_err().to_string();
         assert!(e.contains("lr.opacity"), "{e}");
+    }
+
+    #[test]
+    fn values_that_cannot_work_are_refused_with_their_range() {
+        type Edit = fn(&mut TrainConfig);
+        let cases: [(Edit, &str, &str); 7] = [
+            (|c| c.lr.position_init = 1e30, "lr.position_init", "(0, 1]"),
+            (|c| c.adam.beta1 = 1.0, "adam.beta1", "[0, 1)"),
+            (|c| c.adam.eps = 0.0, "adam.eps", "(0, 1]"),
+            (
+                |c| c.densify.percent_dense = -0.01,
+                "densify.percent_dense",
+                "[0, 1]",
+            ),
+            (
+                |c| c.spwm.as_mut().unwrap().quantile = 2.0,
+                "spwm.quantile",
+                "[0, 1]",
+            ),
+            (|c| c.iterations = 0, "iterations", "[1, 1000000]"),
+            (
+                |c| c.background = f64::INFINITY,
+                "background",
+                "(-inf, inf)",
+            ),
+        ];
+        for (edit, field, range) in cases {
+            let mut c = TrainConfig::preset(Method::Unispine);
+            edit(&mut c);
+            let e = c.validate().unwrap_err().to_string();
+            assert!(e.contains(field) && e.contains(range), "{e}");
+        }
+    }
+
+    #[test]
+    fn a_compressed_config_is_not_compressed_twice() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut c = TrainConfig::preset(Method::Unispine);
+        c.iterations = 2000;
+        c.compress_schedule();
+        let p = dir.path().join("config.json");
+        c.save(&p).unwrap();
+        let o = TrainOverrides {
+            config: Some(p.clone()),
+            ..Default::default()
+        };
+        assert_eq!(o.apply(Method::Unispine, None).unwrap(), c);
+        let o = TrainOverrides {
+            config: Some(p),
+            compress_schedule: true,
+            ..Default::default()
+        };
+        let e = o.apply(Method::Unispine, None).unwrap_err().to_string();
+        assert!(e.contains("already compressed"), "{e}");
     }
 
     #[test]

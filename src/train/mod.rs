@@ -10,36 +10,41 @@
 //!    -> backward; a non-finite loss, gradient or parameter stops the run with
 //!    [`Error::Diverged`] naming the iteration and the view;
 //! 4. test evaluation at the evaluation iterations (before this iteration's update, like
-//!    upstream's `training_report`);
+//!    upstream's `training_report`), timed on its own;
 //! 5. densification statistics, clone / split / prune, opacity reset ([`crate::densify`]);
 //! 6. Adam step, skipped at the last iteration (upstream `if iteration < opt.iterations`), for
 //!    no group after a densification (upstream re-creates every tensor, so none has a gradient)
 //!    and not for the opacity after a reset.
 //!
-//! Targets are the projections min-max normalised per view ([`crate::eval::normalise_gt`]).
+//! Targets are the projections min-max normalised per view ([`crate::dataset::targets`]).
 //! The scene extent is 1.1 x the largest distance of a training camera centre from their mean
 //! (3DGS `getNerfppNorm`).
 //!
-//! Run folder: `config.json`, `metrics.json`, `log.csv`, `model.ply`, `checkpoint.ply` +
-//! `checkpoint.json` (the last good state), `previews/test_KK.png` (render | ground truth).
+//! At the last iteration nothing changes the model after the evaluation (no densification,
+//! opacity reset or Adam step), so the model evaluated there is the model saved: upstream
+//! `train.py` also calls `scene.save` before that iteration's densification.
+//!
+//! Divergence ([`Error::Diverged`]) is also declared when nothing is rendered in a training
+//! view (no Gaussian visible) and when every Gaussian is more than [`LEAVE_FACTOR`] scene
+//! extents from the volume centre.
+//!
+//! The loop with its events and files is [`session`]; the run folder is [`run_dir`].
 
 pub mod config;
 pub mod event;
+pub mod run_dir;
+pub mod session;
 
-use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde::{Deserialize, Serialize};
 
-use crate::dataset::Dataset;
+use crate::dataset::{targets, Dataset};
 use crate::densify::TrainState;
 use crate::error::{Error, Result};
 use crate::eval::{self, EvalResult};
-use crate::gaussians::{init, ply, Gaussians};
+use crate::gaussians::init;
 use crate::image2d::Image2d;
 use crate::loss::{self, spwm};
 use crate::optim::{Group, N_GROUPS};
@@ -47,6 +52,8 @@ use crate::render::{self, RenderSettings};
 
 pub use config::{Method, TrainConfig, TrainOverrides};
 pub use event::Event;
+pub use run_dir::{Checkpoint, EvalPoint, Metrics, RunDir};
+pub use session::{resume, run, run_with, Control};
 
 /// Scene extent: 1.1 x max distance of the camera centres from their mean (3DGS
 /// `getNerfppNorm`, used as `spatial_lr_scale` and in the densification thresholds).
@@ -66,6 +73,10 @@ pub fn scene_extent(ds: &Dataset, views: usize) -> f64 {
     1.1 * d
 }
 
+/// A run has diverged when every Gaussian is farther than this many scene extents from the
+/// centre of the volume box.
+pub const LEAVE_FACTOR: f64 = 10.0;
+
 /// What one iteration did.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StepInfo {
@@ -74,50 +85,19 @@ pub struct StepInfo {
     pub loss: loss::LossValue,
     pub psnr: f64,
     pub n_gaussians: usize,
-    pub eval: Option<EvalResult>,
+    pub eval: Option<StepEval>,
     pub densified: Option<crate::densify::DensifyReport>,
 }
 
-/// One evaluation point of `metrics.json`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct EvalPoint {
-    pub iteration: usize,
-    pub psnr: f64,
-    pub ssim: f64,
+/// The test evaluation of an iteration: of the model before that iteration's densification
+/// and update (at the last iteration, the model that is saved).
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepEval {
+    pub result: EvalResult,
+    /// Gaussians of the evaluated model.
     pub n_gaussians: usize,
-}
-
-/// `metrics.json` of a run.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Metrics {
-    pub method: String,
-    /// Iterations completed.
-    pub iterations: usize,
-    /// False when stopped early (Ctrl-C).
-    pub completed: bool,
-    /// Test PSNR / SSIM at the evaluation iterations.
-    pub evals: Vec<EvalPoint>,
-    /// Metrics of the last evaluation (the final model when completed).
-    pub test_psnr: Option<f64>,
-    pub test_ssim: Option<f64>,
-    /// Wall time of the training loop (everything from the first to the last iteration,
-    /// evaluation passes and checkpoints included), seconds.
-    pub train_time_s: f64,
-    /// Part of `train_time_s` spent in the test evaluations.
-    pub eval_time_s: f64,
-    /// Test-view render speed (see `eval::render_fps`).
-    pub render_fps: Option<f64>,
-    pub render_fps_protocol: String,
-    /// Final number of Gaussians.
-    pub n_gaussians: usize,
-    /// Peak resident memory (VmHWM), bytes.
-    pub peak_memory_bytes: Option<u64>,
-    /// Scene extent (mm).
-    pub extent: f64,
-    /// Render settings of the final model (what `unispine eval` uses).
-    pub render: RenderSettings,
-    /// rayon threads of the run.
-    pub threads: usize,
+    /// Wall time of the evaluation alone (rendering and scoring the test views), seconds.
+    pub seconds: f64,
 }
 
 /// The training loop's state; [`Trainer::step`] runs one iteration.
@@ -157,10 +137,8 @@ impl<'a> Trainer<'a> {
                 "fewer projections than angles",
             ));
         }
-        let targets: Vec<Image2d<f32>> = (0..nv)
-            .map(|k| eval::normalise_gt(&ds.train.projections[k], &format!("train projection {k}")))
-            .collect::<Result<_>>()?;
-        let test_targets = eval::test_targets(ds)?;
+        let targets = targets::train_targets(ds, nv)?;
+        let test_targets = targets::test_targets(ds)?;
         let priors = targets
             .iter()
             .map(|t| cfg.spwm.as_ref().map(|c| spwm::view_prior(t, c)))
@@ -191,6 +169,61 @@ impl<'a> Trainer<'a> {
         }
     }
 
+    /// `Some(distance of the nearest Gaussian)` when every Gaussian is more than
+    /// [`LEAVE_FACTOR`] scene extents from the centre of the volume box.
+    fn all_left_the_scene(&self) -> Option<f64> {
+        let geo = &self.ds.geometry;
+        let limit = LEAVE_FACTOR * self.extent.max(1e-9);
+        let mut nearest = f64::INFINITY;
+        for m in &self.state.params.means {
+            let d2: f64 = (0..3)
+                .map(|a| (m[a] as f64 - geo.off_origin[a]).powi(2))
+                .sum();
+            nearest = nearest.min(d2.sqrt());
+            if nearest <= limit {
+                return None;
+            }
+        }
+        Some(nearest)
+    }
+
+    /// The view-order state: generator word position and the views left in the stack.
+    pub fn view_order(&self) -> (u128, Vec<usize>) {
+        (self.rng.get_word_pos(), self.stack.clone())
+    }
+
+    /// Continue from a checkpoint of a run with the same config and dataset.
+    pub fn restore(&mut self, c: &Checkpoint) -> Result<()> {
+        if c.iteration > self.cfg.iterations {
+            return Err(Error::invalid(
+                "checkpoint.iteration",
+                format!(
+                    "{} is beyond the config's {} iterations",
+                    c.iteration, self.cfg.iterations
+                ),
+            ));
+        }
+        if let Some(&v) = c.view_stack.iter().find(|&&v| v >= self.targets.len()) {
+            return Err(Error::invalid(
+                "checkpoint.view_stack",
+                format!(
+                    "view {v} but the run has {} training views",
+                    self.targets.len()
+                ),
+            ));
+        }
+        let n = c.state.len();
+        let st = &c.state;
+        if st.adam.m.len() != n || st.adam.v.len() != n || st.stats.denom.len() != n {
+            return Err(Error::invalid("checkpoint", "arrays of different lengths"));
+        }
+        self.state = c.state.clone();
+        self.rng.set_word_pos(c.rng_word_pos);
+        self.stack = c.view_stack.clone();
+        self.iteration = c.iteration;
+        Ok(())
+    }
+
     fn next_view(&mut self) -> usize {
         if self.stack.is_empty() {
             self.stack = (0..self.targets.len()).collect();
@@ -214,6 +247,12 @@ impl<'a> Trainer<'a> {
         let cam = self.ds.train_camera(view);
         let (img, saved) = render::forward(&self.state.params, &cam, &settings)
             .map_err(|e| diverged(format!("rendering training view {view}: {e}")))?;
+        if saved.splats.radius.iter().all(|&r| r == 0) {
+            return Err(diverged(format!(
+                "nothing is rendered in training view {view}: none of the {} Gaussians is visible",
+                self.state.len()
+            )));
+        }
         let gt = &self.targets[view];
         let weights = match (&cfg.spwm, &self.priors[view]) {
             (Some(c), Some(p)) => {
@@ -235,19 +274,24 @@ impl<'a> Trainer<'a> {
         }
         let psnr = eval::psnr(&eval::clamp01(&img), gt);
         let eval = if cfg.is_eval_point(it) {
-            Some(eval::evaluate(
-                &self.state.params,
-                self.ds,
-                &self.test_targets,
-                &settings,
-            )?)
+            let te = Instant::now();
+            let result =
+                eval::evaluate(&self.state.params, self.ds, &self.test_targets, &settings)?;
+            Some(StepEval {
+                result,
+                n_gaussians: self.state.len(),
+                seconds: te.elapsed().as_secs_f64(),
+            })
         } else {
             None
         };
         let d = &cfg.densify;
-        let mut active = [it < cfg.iterations; N_GROUPS];
+        let last = it == cfg.iterations;
+        let mut active = [!last; N_GROUPS];
         let mut densified = None;
-        if d.collects(it) {
+        // Nothing changes the model at the last iteration: what was evaluated above is what is
+        // saved (upstream saves its model before that iteration's densification too).
+        if d.collects(it) && !last {
             self.state.accumulate(&grads.mean2d_ndc_norm, &grads.radius);
             if d.densifies(it) {
                 let seed = cfg.seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ it as u64;
@@ -272,6 +316,13 @@ impl<'a> Trainer<'a> {
                 "parameter after the update on training view {view}: {e}"
             )));
         }
+        if let Some(far) = self.all_left_the_scene() {
+            return Err(diverged(format!(
+                "every Gaussian left the scene after the update on training view {view} (the \
+                 nearest is {far:.3e} mm from the volume centre, more than {LEAVE_FACTOR} scene \
+                 extents)"
+            )));
+        }
         self.iteration = it;
         Ok(StepInfo {
             iteration: it,
@@ -283,232 +334,6 @@ impl<'a> Trainer<'a> {
             densified,
         })
     }
-}
-
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, bytes).map_err(|e| Error::io(&tmp, e))?;
-    std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
-}
-
-/// Write `checkpoint.ply` and `checkpoint.json` (iteration, count, render settings).
-pub fn write_checkpoint(
-    dir: &Path,
-    g: &Gaussians<f32>,
-    iteration: usize,
-    settings: &RenderSettings,
-) -> Result<()> {
-    let tmp = dir.join("checkpoint.ply.part");
-    ply::write_ply(&tmp, g)?;
-    let path = dir.join("checkpoint.ply");
-    std::fs::rename(&tmp, &path).map_err(|e| Error::io(&path, e))?;
-    let j = serde_json::json!({
-        "iteration": iteration,
-        "n_gaussians": g.len(),
-        "render": settings,
-    });
-    write_atomic(
-        &dir.join("checkpoint.json"),
-        serde_json::to_string_pretty(&j).unwrap().as_bytes(),
-    )
-}
-
-/// An image as 8-bit grey with values in [0, 1] (clamped).
-fn to_u8(img: &Image2d<f32>) -> Vec<u8> {
-    img.data
-        .iter()
-        .map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
-        .collect()
-}
-
-/// Write `render | ground truth` side by side as a PNG.
-pub fn write_preview(path: &Path, render: &Image2d<f32>, gt: &Image2d<f32>) -> Result<()> {
-    let (w, h) = (render.width, render.height);
-    let gap = 4;
-    let mut buf = image::GrayImage::new((2 * w + gap) as u32, h as u32);
-    let (a, b) = (to_u8(render), to_u8(gt));
-    for r in 0..h {
-        for c in 0..w {
-            buf.put_pixel(c as u32, r as u32, image::Luma([a[r * w + c]]));
-            buf.put_pixel((w + gap + c) as u32, r as u32, image::Luma([b[r * w + c]]));
-        }
-    }
-    buf.save(path)
-        .map_err(|e| Error::format(path, "png", e.to_string()))
-}
-
-/// Train `cfg` on `ds`, writing the run folder `out` (when given), reporting to `on_event`;
-/// `stop` (set by Ctrl-C) ends the run cleanly after the current iteration with a checkpoint.
-pub fn run(
-    cfg: &TrainConfig,
-    ds: &Dataset,
-    out: Option<&Path>,
-    stop: &AtomicBool,
-    on_event: &mut dyn FnMut(&Event),
-) -> Result<Metrics> {
-    let mut tr = Trainer::new(cfg.clone(), ds)?;
-    if let Some(dir) = out {
-        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-        cfg.save(&dir.join("config.json"))?;
-        write_checkpoint(dir, &tr.state.params, 0, &tr.settings(1))?;
-    }
-    on_event(&Event::Started {
-        total: cfg.iterations,
-        n_gaussians: tr.state.len(),
-        train_views: tr.targets.len(),
-        test_views: tr.test_targets.len(),
-        extent: tr.extent,
-    });
-    let mut log = String::from("iteration,view,loss,data,ssim,psnr,n_gaussians,seconds\n");
-    let mut evals = Vec::new();
-    let mut eval_time = 0.0;
-    let t0 = Instant::now();
-    let (mut win_t, mut win_it) = (Instant::now(), 0usize);
-    let mut its_per_sec = 0.0;
-    let mut completed = true;
-    let flush_log = |log: &str| -> Result<()> {
-        if let Some(dir) = out {
-            write_atomic(&dir.join("log.csv"), log.as_bytes())?;
-        }
-        Ok(())
-    };
-    while tr.iteration < cfg.iterations {
-        if stop.load(Ordering::SeqCst) {
-            completed = false;
-            on_event(&Event::Stopped {
-                iteration: tr.iteration,
-            });
-            break;
-        }
-        let te = Instant::now();
-        let info = match tr.step() {
-            Ok(i) => i,
-            Err(e) => {
-                flush_log(&log)?;
-                return Err(e);
-            }
-        };
-        let it = info.iteration;
-        if let Some(e) = &info.eval {
-            eval_time += te.elapsed().as_secs_f64();
-            evals.push(EvalPoint {
-                iteration: it,
-                psnr: e.psnr,
-                ssim: e.ssim,
-                n_gaussians: info.n_gaussians,
-            });
-            on_event(&Event::Eval {
-                iteration: it,
-                psnr: e.psnr,
-                ssim: e.ssim,
-                n_gaussians: info.n_gaussians,
-            });
-        }
-        if let Some(r) = info.densified {
-            on_event(&Event::Densified {
-                iteration: it,
-                report: r,
-            });
-        }
-        let _ = writeln!(
-            log,
-            "{it},{},{:.9e},{:.9e},{:.9e},{:.6},{},{:.3}",
-            info.view,
-            info.loss.total,
-            info.loss.data,
-            info.loss.ssim,
-            info.psnr,
-            info.n_gaussians,
-            t0.elapsed().as_secs_f64()
-        );
-        win_it += 1;
-        let dt = win_t.elapsed().as_secs_f64();
-        if dt >= 1.0 || its_per_sec == 0.0 {
-            its_per_sec = win_it as f64 / dt.max(1e-9);
-            if dt >= 1.0 {
-                win_t = Instant::now();
-                win_it = 0;
-            }
-        }
-        on_event(&Event::Progress {
-            iteration: it,
-            total: cfg.iterations,
-            loss: info.loss.total,
-            psnr: info.psnr,
-            n_gaussians: info.n_gaussians,
-            its_per_sec,
-        });
-        if let Some(dir) = out {
-            if cfg.checkpoint_every > 0 && it % cfg.checkpoint_every == 0 && it < cfg.iterations {
-                write_checkpoint(dir, &tr.state.params, it, &tr.settings(it + 1))?;
-                flush_log(&log)?;
-                on_event(&Event::Checkpoint { iteration: it });
-            }
-        }
-    }
-    let train_time = t0.elapsed().as_secs_f64();
-    let final_settings = tr.settings(tr.iteration.max(1));
-    let g = &tr.state.params;
-    let render_fps = if completed {
-        Some(eval::render_fps(g, ds, &final_settings)?.0)
-    } else {
-        None
-    };
-    if let Some(dir) = out {
-        write_checkpoint(dir, g, tr.iteration, &final_settings)?;
-        on_event(&Event::Checkpoint {
-            iteration: tr.iteration,
-        });
-        flush_log(&log)?;
-        if completed {
-            ply::write_ply(&dir.join("model.ply"), g)?;
-            let pdir = dir.join("previews");
-            std::fs::create_dir_all(&pdir).map_err(|e| Error::io(&pdir, e))?;
-            let n = tr.test_targets.len();
-            let k = cfg.preview_views.min(n);
-            for j in 0..k {
-                let v = j * n / k.max(1);
-                let (img, _) = render::forward(g, &ds.test_camera(v), &final_settings)?;
-                write_preview(
-                    &pdir.join(format!("test_{v:02}.png")),
-                    &img,
-                    &tr.test_targets[v],
-                )?;
-            }
-        }
-    }
-    let last = evals.last().cloned();
-    let metrics = Metrics {
-        method: cfg.method.name().to_string(),
-        iterations: tr.iteration,
-        completed,
-        test_psnr: last.as_ref().map(|e| e.psnr),
-        test_ssim: last.as_ref().map(|e| e.ssim),
-        evals,
-        train_time_s: train_time,
-        eval_time_s: eval_time,
-        render_fps,
-        render_fps_protocol: "test views, forward only (project + tiles + composite), f32, one warm-up render, median of 3 timed passes".into(),
-        n_gaussians: g.len(),
-        peak_memory_bytes: eval::peak_memory_bytes(),
-        extent: tr.extent,
-        render: final_settings,
-        threads: rayon::current_num_threads(),
-    };
-    if let Some(dir) = out {
-        let s = serde_json::to_string_pretty(&metrics).expect("metrics serialise");
-        write_atomic(&dir.join("metrics.json"), s.as_bytes())?;
-    }
-    Ok(metrics)
-}
-
-/// Paths of a run folder.
-pub fn run_paths(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
-    (
-        dir.join("config.json"),
-        dir.join("metrics.json"),
-        dir.join("model.ply"),
-    )
 }
 
 #[cfg(test)]
@@ -523,18 +348,7 @@ mod tests {
             .map(|k| k as f64 * std::f64::consts::PI / 50.0)
             .collect();
         let ds = Dataset {
-            geometry: crate::geometry::ConeBeam {
-                dsd: 1500.0,
-                dso: 1000.0,
-                n_detector: [8, 8],
-                d_detector: [1.0, 1.0],
-                n_voxel: [8, 8, 8],
-                d_voxel: [1.0; 3],
-                off_origin: [0.0; 3],
-                off_detector: [0.0; 2],
-                mode: crate::geometry::Mode::Cone,
-                accuracy: 0.5,
-            },
+            geometry: crate::geometry::ConeBeam::centred([8, 8], [1.0, 1.0], [8, 8, 8], [1.0; 3]),
             train: Split {
                 angles,
                 projections: vec![],

@@ -160,23 +160,6 @@ fn splat_gradients_match_central_differences() {
 }
 
 #[test]
-fn exp_f32_is_within_2e_7_of_exp() {
-    let mut worst: f64 = 0.0;
-    let n = 200_000;
-    for k in 0..=n {
-        let x = -87.0 + 87.0 * k as f64 / n as f64;
-        let xf = x as f32;
-        let got = exp_f32(xf) as f64;
-        let want = (xf as f64).exp();
-        worst = worst.max((got - want).abs() / want);
-    }
-    println!("exp_f32 max relative error on [-87, 0]: {worst:.2e}");
-    assert!(worst < 2e-7, "{worst:e}");
-    assert_eq!(exp_f32(0.0), 1.0);
-    assert_eq!(exp_k(0.5f64), 0.5f64.exp());
-}
-
-#[test]
 fn alpha_clamp_and_exclusive_stop() {
     // Three splats on one pixel, each o G > 0.99 there (clamped to 0.99), colours 1, 2, 4.
     // T: 1 -> 0.01 -> 1e-4 (not < 1e-4: blended) -> the third would give 1e-6 < 1e-4: the pixel
@@ -275,5 +258,91 @@ fn backward_with_saved_work_lists_equals_rebuilt_lists_bitwise() {
         let mut bare = saved.clone();
         bare.work = WorkLists::default();
         assert_eq!(backward(&s32, &saved, &w32), backward(&s32, &bare, &w32));
+    }
+}
+
+/// Every compiled kernel this CPU can run: (instruction set, 16 lanes?).
+fn kernels() -> Vec<Kernel> {
+    let mut k = vec![Kernel {
+        simd: Simd::Scalar,
+        wide: false,
+    }];
+    if Simd::Avx2.supported() {
+        k.push(Kernel {
+            simd: Simd::Avx2,
+            wide: false,
+        });
+        k.push(Kernel {
+            simd: Simd::Avx2,
+            wide: true,
+        });
+    }
+    if Simd::Avx512.supported() {
+        k.push(Kernel::of(Simd::Avx512));
+    }
+    k
+}
+
+/// Bits of an image and of splat gradients.
+fn bits<R: Real>(img: &Image2d<R>, g: &SplatGrads<R>, saved: &CompositeSaved<R>) -> Vec<u64> {
+    let mut v: Vec<u64> = img.data.iter().map(|x| x.f64().to_bits()).collect();
+    v.extend(saved.final_t.iter().map(|x| x.f64().to_bits()));
+    v.extend(saved.n_contrib.iter().map(|&x| x as u64));
+    v.push(saved.blends);
+    for (m, c) in g.mean2d.iter().zip(&g.conic) {
+        v.extend(m.iter().chain(c).map(|x| x.f64().to_bits()));
+    }
+    v.extend(g.opacity.iter().chain(&g.color).map(|x| x.f64().to_bits()));
+    v
+}
+
+fn run_kernel<R: Real>(k: Kernel, s: &Splats<R>, w: usize, h: usize, d: &Image2d<R>) -> Vec<u64> {
+    let bg = R::c(0.2);
+    let (img, saved) = forward_kernel(k, s, w, h, bg);
+    let g = backward_kernel(k, s, &saved, d);
+    let mut bare = saved.clone();
+    bare.work = WorkLists::default();
+    assert_eq!(
+        bits(&img, &backward_kernel(k, s, &bare, d), &saved),
+        bits(&img, &g, &saved),
+        "{k:?}: rebuilt work lists"
+    );
+    bits(&img, &g, &saved)
+}
+
+#[test]
+fn every_simd_path_gives_the_same_bits() {
+    let paths = kernels();
+    println!("kernels run: {paths:?} (of scalar, avx2 x 8/16 lanes, avx512 x 16 lanes)");
+    // Sizes with partial tiles at the right and bottom edges, dense and sparse scenes.
+    for (n, w, h, seed) in [(400, 64, 48, 21), (900, 53, 37, 22), (60, 37, 29, 23)] {
+        let s = random_splats(n, w, h, seed);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed + 3);
+        let d = Image2d::from_vec(
+            w,
+            h,
+            (0..w * h).map(|_| rng.random_range(-1.0..1.0)).collect(),
+        );
+        let s32 = to_f32(&s);
+        let d32 = Image2d::from_vec(w, h, d.data.iter().map(|&x| x as f32).collect());
+        let want64 = run_kernel(paths[0], &s, w, h, &d);
+        let want32 = run_kernel(paths[0], &s32, w, h, &d32);
+        assert!(want32.iter().any(|&b| b != 0));
+        for &k in &paths[1..] {
+            assert!(
+                run_kernel(k, &s, w, h, &d) == want64,
+                "{k:?} f64 n {n} {w}x{h}"
+            );
+            assert!(
+                run_kernel(k, &s32, w, h, &d32) == want32,
+                "{k:?} f32 n {n} {w}x{h}"
+            );
+        }
+        // The public entry points with every path (unsupported ones fall back).
+        for p in Simd::ALL {
+            let (img, saved) = forward_with(p, &s32, w, h, 0.2f32);
+            let g = backward_with(p, &s32, &saved, &d32);
+            assert!(bits(&img, &g, &saved) == want32, "{p:?}");
+        }
     }
 }

@@ -11,16 +11,9 @@ use crate::math::fd;
 
 pub(crate) fn geo(mode: Mode, off: [f64; 2]) -> ConeBeam {
     ConeBeam {
-        dsd: 1500.0,
-        dso: 1000.0,
-        n_detector: [64, 80],
-        d_detector: [2.0, 1.5],
-        n_voxel: [32, 32, 32],
-        d_voxel: [2.0, 2.0, 2.0],
-        off_origin: [0.0; 3],
         off_detector: off,
         mode,
-        accuracy: 0.5,
+        ..ConeBeam::centred([64, 80], [2.0, 1.5], [32, 32, 32], [2.0, 2.0, 2.0])
     }
 }
 

@@ -94,8 +94,9 @@ impl Tissue {
         Tissue::ALL.get(c as usize).copied()
     }
 
-    /// Linear attenuation coefficient at about 70 keV, in 1/mm. Sources (research/data.md
-    /// section 4.3: NIST-format tables shipped with deepdrr 1.2.2, and the HU -> mu rule
+    /// Linear attenuation coefficient at about 70 keV, in 1/mm. Sources (the
+    /// NIST-format tables shipped with deepdrr 1.2.2, `deepdrr/material/material_decompositions/`,
+    /// and the HU -> mu rule
     /// mu = 0.01936 (1 + HU/1000) /mm, the NAF mapping with mu_water at 70 keV):
     /// air 2e-5 (stored as 0, see notes); fat -100 HU; soft tissue = muscle 0.1924 cm2/g x
     /// 1.05 g/cm3; disc 90 HU; canal (CSF) 10 HU; cancellous 200 HU (mean; per vertebra

@@ -1,0 +1,140 @@
+//! Benchmark scenes and timings, printed by `unispine bench` and used by the criterion benches
+//! and the determinism tests.
+//!
+//! - [`ct_like_scene`] on [`bench_geometry`]: Gaussians filling a CT-like volume box;
+//! - [`time_render`]: forward and forward + backward of the rasterizer (projection, Eq. 3, and
+//!   compositing, Eqs. 4-5) in f32, median times and Gaussian-pixel blends;
+//! - [`time_naive`]: the same throughput of the naive per-pixel reference
+//!   ([`crate::render::composite::naive_forward`], every Gaussian tested at every pixel).
+
+use std::time::Instant;
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::gaussians::model::N_FEATURES;
+use crate::gaussians::Gaussians;
+use crate::geometry::ConeBeam;
+use crate::image2d::Image2d;
+use crate::render::{self, composite, RenderSettings};
+
+/// Side of the CT-like volume box, mm.
+pub const BOX_MM: f64 = 256.0;
+
+/// Cone-beam geometry of the benchmark: DSD 1500 mm, DSO 1000 mm, a `size` x `size` detector
+/// whose field of view covers the 256 mm box with margin (420 mm at the detector).
+pub fn bench_geometry(size: usize) -> ConeBeam {
+    let pitch = 420.0 / size as f64;
+    ConeBeam::centred(
+        [size, size],
+        [pitch, pitch],
+        [128, 128, 128],
+        [BOX_MM / 128.0; 3],
+    )
+}
+
+/// `n` Gaussians filling the 256 mm box around the isocentre like a model of a CT volume
+/// (seeded): positions uniform in the box, scales log-uniform in [0.3, 0.8] x the mean spacing
+/// (box / n^(1/3)) per axis, random rotations, opacities sigmoid(U(-3, 0)) (0.05-0.5), features
+/// giving intensities around 0.5.
+pub fn ct_like_scene(n: usize, seed: u64) -> Gaussians<f32> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let spacing = BOX_MM / (n.max(1) as f64).cbrt();
+    let mut g = Gaussians::<f64>::zeros(n);
+    for i in 0..n {
+        g.means[i] = std::array::from_fn(|_| rng.random_range(-0.5..0.5) * BOX_MM);
+        g.log_scales[i] = std::array::from_fn(|_| (spacing * rng.random_range(0.3f64..0.8)).ln());
+        g.quats[i] = std::array::from_fn(|_| rng.random_range(-1.0..1.0));
+        g.quats[i][0] += 0.5;
+        g.opacity_logits[i] = rng.random_range(-3.0..0.0);
+        g.features[i] = std::array::from_fn(|k| {
+            if k == 0 {
+                rng.random_range(-0.5..0.5)
+            } else {
+                rng.random_range(-0.05..0.05)
+            }
+        });
+    }
+    debug_assert_eq!(g.features[0].len(), N_FEATURES);
+    g.cast()
+}
+
+/// Timings of one render benchmark case.
+#[derive(Clone, Copy, Debug)]
+pub struct RenderTiming {
+    pub gaussians: usize,
+    pub size: usize,
+    /// Median forward time (projection + compositing), s.
+    pub forward: f64,
+    /// Median forward + backward time, s.
+    pub forward_backward: f64,
+    /// Blends (pixel, Gaussian pairs composited) of one forward pass.
+    pub blends: u64,
+    /// Process CPU time (all threads) per forward + backward, s (Linux; None elsewhere). On a
+    /// shared machine this is less sensitive to other load than the wall time.
+    pub cpu_forward_backward: Option<f64>,
+}
+
+/// CPU time (user + system, all threads) of this process so far, s (Linux `/proc/self/stat`).
+pub fn process_cpu_seconds() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let f: Vec<&str> = s.rsplit(')').next()?.split_whitespace().collect();
+    let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Time `reps` forward and forward + backward passes of the CT-like scene (f32, paper RIRF,
+/// upstream gradient 1/pixels everywhere).
+pub fn time_render(n: usize, size: usize, reps: usize) -> crate::Result<RenderTiming> {
+    let g = ct_like_scene(n, 7);
+    let cam = bench_geometry(size).camera(0.3);
+    let st = RenderSettings::default();
+    let d = Image2d::filled(size, size, 1.0 / (size * size) as f32);
+    let (_, saved) = render::forward(&g, &cam, &st)?; // warm-up
+    let blends = saved.composite.blends;
+    let mut fwd = Vec::new();
+    let mut fb = Vec::new();
+    let cpu0 = process_cpu_seconds();
+    for _ in 0..reps.max(1) {
+        let t0 = Instant::now();
+        let (img, saved) = render::forward(&g, &cam, &st)?;
+        let t1 = Instant::now();
+        let grads = render::backward(&g, &cam, &st, &saved, &d);
+        let t2 = Instant::now();
+        std::hint::black_box((&img, &grads));
+        fwd.push((t1 - t0).as_secs_f64());
+        fb.push((t2 - t0).as_secs_f64());
+    }
+    let cpu = match (cpu0, process_cpu_seconds()) {
+        (Some(a), Some(b)) => Some((b - a) / reps.max(1) as f64),
+        _ => None,
+    };
+    Ok(RenderTiming {
+        gaussians: n,
+        size,
+        forward: median(fwd),
+        forward_backward: median(fb),
+        blends,
+        cpu_forward_backward: cpu,
+    })
+}
+
+/// Blends per second of the naive per-pixel reference on `n` Gaussians at `size` x `size`
+/// (one run, single-threaded), and its blend count.
+pub fn time_naive(n: usize, size: usize) -> crate::Result<(f64, u64)> {
+    let g = ct_like_scene(n, 7);
+    let cam = bench_geometry(size).camera(0.3);
+    let st = RenderSettings::default();
+    let (splats, _) = render::project::forward(&g, &cam, &st)?;
+    let (_, saved) = composite::forward(&splats, size, size, 0.0);
+    let t0 = Instant::now();
+    let img = composite::naive_forward(&splats, size, size, 0.0);
+    let dt = t0.elapsed().as_secs_f64();
+    std::hint::black_box(&img);
+    Ok((saved.blends as f64 / dt, saved.blends))
+}

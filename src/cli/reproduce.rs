@@ -1,0 +1,288 @@
+//! `unispine reproduce PLAN --out DIR [--jobs N]`: run a plan (built-in name or TOML file) and
+//! write `results.csv`, `results.json`, `tables.md` (with verdicts) into DIR.
+//! `--show NAME` prints a built-in plan; `--task I` runs cell I only (a Slurm array task);
+//! `--collect` builds the tables from whatever finished.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+
+use crate::reproduce::aggregate;
+use crate::reproduce::plan::{Plan, TrainSchema, BUILTIN};
+use crate::reproduce::run::{self, Outcome, RunEvent, RunOptions};
+
+/// Arguments of `unispine reproduce`.
+#[derive(Debug, clap::Args)]
+pub struct ReproduceArgs {
+    /// A built-in plan (quick, table2, table1, stability, compactness, each with a -full twin)
+    /// or a plan TOML file.
+    pub plan: Option<String>,
+    /// Output folder (default: reproduce-PLANNAME).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Cells run at once; the cores are split between them (results do not depend on it).
+    #[arg(long, default_value_t = 1)]
+    pub jobs: usize,
+    /// Print a built-in plan as TOML (copy it and edit it).
+    #[arg(long, value_name = "NAME")]
+    pub show: Option<String>,
+    /// List the cells of the plan with their index (for --task) and run folder.
+    #[arg(long)]
+    pub list: bool,
+    /// Run only cell I (0-based; what a Slurm array task runs). Without I: SLURM_ARRAY_TASK_ID.
+    #[arg(long, value_name = "I", num_args = 0..=1, default_missing_value = "-1",
+          allow_negative_numbers = true)]
+    pub task: Option<i64>,
+    /// Only build the tables from the cells that finished.
+    #[arg(long)]
+    pub collect: bool,
+    /// Write a Slurm job array (one task per cell), a dependent collect job and
+    /// DIR/slurm/submit.sh instead of running; the datasets are built now, once.
+    #[arg(long)]
+    pub emit_slurm: bool,
+}
+
+fn fmt_s(s: f64) -> String {
+    let s = s.max(0.0).round() as u64;
+    if s >= 3600 {
+        format!("{}:{:02}:{:02}", s / 3600, (s / 60) % 60, s % 60)
+    } else {
+        format!("{}:{:02}", s / 60, s % 60)
+    }
+}
+
+/// Run `unispine reproduce`.
+pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
+    if let Some(name) = &args.show {
+        let text = crate::reproduce::plan::builtin(name).with_context(|| {
+            format!(
+                "no built-in plan `{name}` (built-in: {})",
+                BUILTIN.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
+            )
+        })?;
+        print!("{text}");
+        return Ok(());
+    }
+    let Some(plan_arg) = &args.plan else {
+        anyhow::bail!(
+            "give a plan: a built-in name ({}) or a TOML file",
+            BUILTIN.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
+        );
+    };
+    if args.jobs == 0 {
+        anyhow::bail!("invalid `--jobs`: must be >= 1");
+    }
+    let schema = TrainSchema::from_cli();
+    let plan = Plan::load(plan_arg, &schema)?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("reproduce-{}", plan.name)));
+    let cells = run::cells(&plan);
+    if args.list {
+        for c in &cells {
+            println!("{}\t{}", c.index, c.rel_dir(&plan).display());
+        }
+        return Ok(());
+    }
+    let base_dir = if std::path::Path::new(plan_arg).is_file() {
+        std::path::Path::new(plan_arg)
+            .parent()
+            .map(|p| p.to_path_buf())
+            .unwrap_or_default()
+    } else {
+        PathBuf::from(".")
+    };
+    let base_dir = if base_dir.as_os_str().is_empty() {
+        PathBuf::from(".")
+    } else {
+        base_dir
+    };
+    let task = match args.task {
+        None => None,
+        Some(-1) => {
+            let v = std::env::var("SLURM_ARRAY_TASK_ID")
+                .context("--task without I needs SLURM_ARRAY_TASK_ID")?;
+            Some(
+                v.trim()
+                    .parse::<usize>()
+                    .with_context(|| format!("SLURM_ARRAY_TASK_ID `{v}` is not a cell index"))?,
+            )
+        }
+        Some(i) if i < 0 => anyhow::bail!("invalid `--task`: {i} is negative"),
+        Some(i) => Some(i as usize),
+    };
+    let cores = std::env::var("SLURM_CPUS_PER_TASK")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+        .unwrap_or_else(|| {
+            std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1)
+        });
+    let opts = RunOptions {
+        out: out.clone(),
+        jobs: args.jobs,
+        bin: std::env::current_exe().context("locating the unispine binary")?,
+        base_dir,
+        cores,
+        only: task.map(|t| vec![t]),
+    };
+    if args.emit_slurm {
+        let abs = |p: &std::path::Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+        let plan_ref = if crate::reproduce::plan::builtin(plan_arg).is_some() {
+            plan_arg.clone()
+        } else {
+            abs(std::path::Path::new(plan_arg)).display().to_string()
+        };
+        std::fs::create_dir_all(&out).with_context(|| out.display().to_string())?;
+        let mut on_event = |e: &RunEvent| {
+            if let RunEvent::DatasetBuilding { name } = e {
+                eprintln!("dataset {name}: building");
+            } else if let RunEvent::DatasetSkipped { name, reason } = e {
+                eprintln!("dataset {name}: skipped (optional): {reason}");
+            }
+        };
+        for d in &plan.datasets {
+            run::prepare_dataset(d, &opts, &mut on_event)?;
+        }
+        let submit = crate::reproduce::slurm::write_scripts(
+            &plan,
+            &abs(&opts.bin),
+            &plan_ref,
+            &abs(&out),
+            &abs(&opts.base_dir),
+        )?;
+        println!(
+            "{} cells as a Slurm job array ({} cpus, {} per task); submit with: sh {}",
+            cells.len(),
+            plan.slurm.cpus_per_task,
+            plan.slurm.mem,
+            submit.display()
+        );
+        return Ok(());
+    }
+    let mut extra = String::new();
+    if !args.collect {
+        eprintln!(
+            "plan `{}`: {} cells ({} datasets x {} methods{} x {} seeds), {} iterations each, \
+             {} at once -> {}",
+            plan.name,
+            cells.len(),
+            plan.datasets.len(),
+            plan.methods.len(),
+            plan.sweep
+                .as_ref()
+                .map(|s| format!(" x {} {} values", s.values.len(), s.flag))
+                .unwrap_or_default(),
+            plan.seeds.len(),
+            plan.iters,
+            args.jobs,
+            out.display()
+        );
+        let mut on_event = |e: &RunEvent| match e {
+            RunEvent::DatasetBuilding { name } => eprintln!("dataset {name}: building"),
+            RunEvent::DatasetSkipped { name, reason } => {
+                eprintln!("dataset {name}: skipped (optional): {reason}")
+            }
+            RunEvent::DatasetFailed { name, error } => {
+                eprintln!("dataset {name}: FAILED, its cells fail: {error}")
+            }
+            RunEvent::CellStarted { k, n, label } => eprintln!("[cell {k}/{n}] {label}: training"),
+            RunEvent::CellEnded {
+                k,
+                n,
+                label,
+                outcome,
+                elapsed_s,
+                eta_s,
+            } => {
+                let what = match outcome {
+                    Outcome::Kept => "finished earlier, kept".to_string(),
+                    Outcome::Done { wall_s } => format!("done in {}", fmt_s(*wall_s)),
+                    Outcome::Failed { error } => format!("FAILED: {error}"),
+                };
+                let left = eta_s
+                    .map(|s| format!(", about {} left", fmt_s(s)))
+                    .unwrap_or_default();
+                eprintln!(
+                    "[cell {k}/{n}] {label}: {what} (elapsed {}{left})",
+                    fmt_s(*elapsed_s)
+                );
+            }
+        };
+        let sum = run::run_plan(&plan, &opts, &mut on_event)?;
+        if task.is_some() {
+            if sum.failed > 0 {
+                anyhow::bail!("the cell failed (see its cell.json and train.log)");
+            }
+            return Ok(());
+        }
+        if sum.trained > 0 {
+            let overhead = sum.total_wall_s - sum.cells_wall_s;
+            let line = format!(
+                "Harness: {} cells trained, {} kept, {} failed; the runs took {:.1} s of wall \
+                 time, the whole command {:.1} s with {} job(s){}.\n",
+                sum.trained,
+                sum.kept,
+                sum.failed,
+                sum.cells_wall_s,
+                sum.total_wall_s,
+                args.jobs,
+                if args.jobs == 1 {
+                    format!(
+                        " (datasets and harness: {:.1} s, {:.2} % of the runs' time)",
+                        overhead,
+                        100.0 * overhead / sum.cells_wall_s.max(1e-9)
+                    )
+                } else {
+                    String::new()
+                }
+            );
+            eprintln!("{}", line.trim_end());
+            extra = line;
+        }
+    }
+    let (rows, verdicts) = aggregate::write_all(&plan, &out, &schema.method_help, &extra)?;
+    let md = std::fs::read_to_string(out.join("tables.md")).unwrap_or_default();
+    // Print the tables and verdicts (everything before the method descriptions).
+    let cut = md.find("## What each method row runs").unwrap_or(md.len());
+    println!("{}", md[..cut].trim_end());
+    println!();
+    for v in &verdicts {
+        println!("verdict: {:<15} {}", v.word.as_str(), v.claim.text);
+    }
+    let missing = aggregate::missing(&rows);
+    if !missing.is_empty() {
+        println!(
+            "\n{} of {} cells have no result: {}",
+            missing.len(),
+            rows.len(),
+            missing
+                .iter()
+                .map(|r| format!("{} ({})", r.run_dir, r.status))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    let charts = crate::report::reproduce::write_report(&rows, &out, &md, plan.floor_db)?;
+    println!(
+        "\nreport: {}\ntables: {}\nresults: {}, {}\ncharts: {}",
+        out.join("report.html").display(),
+        out.join("tables.md").display(),
+        out.join("results.csv").display(),
+        out.join("results.json").display(),
+        charts
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    if !args.collect && rows.iter().any(|r| r.status == "failed") {
+        anyhow::bail!(
+            "{} cell(s) failed (their errors are in tables.md)",
+            rows.iter().filter(|r| r.status == "failed").count()
+        );
+    }
+    Ok(())
+}

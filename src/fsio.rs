@@ -1,0 +1,154 @@
+//! Atomic file writes and output-folder hygiene, shared by run folders
+//! ([`crate::train::run_dir`]), dataset folders ([`crate::dataset::store`]) and the CLI.
+//!
+//! [`write_atomic`] writes the bytes to a temporary name in the same folder
+//! (`.NAME.tmp`), flushes them to disk, and renames the temporary file onto `NAME`. A reader
+//! therefore sees either the old file or the complete new one, never a partial file; a failed
+//! write (disk full, permission) removes the temporary file and leaves the old file as it was,
+//! so no 0-byte or truncated output is left behind.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, Result};
+
+/// The temporary name [`write_atomic`] uses for `path`: `.NAME.tmp` beside it.
+pub fn temp_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_default();
+    path.with_file_name(format!(".{name}.tmp"))
+}
+
+/// Write `bytes` to `path` atomically (temporary name, fsync, rename). On error the temporary
+/// file is removed and `path` is unchanged.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let tmp = temp_path(path);
+    let res = (|| -> std::io::Result<()> {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()
+    })();
+    if let Err(e) = res {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(Error::io(path, e));
+    }
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        Error::io(path, e)
+    })
+}
+
+/// [`write_atomic`] of pretty-printed JSON with a final newline.
+pub fn write_json_atomic<T: serde::Serialize + ?Sized>(path: &Path, value: &T) -> Result<()> {
+    let mut s = serde_json::to_string_pretty(value)
+        .map_err(|e| Error::format(path, "json", e.to_string()))?;
+    s.push('\n');
+    write_atomic(path, s.as_bytes())
+}
+
+/// A grey 8-bit image encoded as PNG in memory and written with [`write_atomic`].
+pub fn write_png_atomic(path: &Path, img: &image::GrayImage) -> Result<()> {
+    let mut buf = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut buf, image::ImageFormat::Png)
+        .map_err(|e| Error::format(path, "png", e.to_string()))?;
+    write_atomic(path, buf.get_ref())
+}
+
+/// Remove `path` if it exists (file or folder); a missing path is not an error.
+pub fn remove_if_exists(path: &Path) -> Result<()> {
+    let r = match std::fs::symlink_metadata(path) {
+        Err(_) => return Ok(()),
+        Ok(m) if m.is_dir() => std::fs::remove_dir_all(path),
+        Ok(_) => std::fs::remove_file(path),
+    };
+    match r {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(Error::io(path, e)),
+        _ => Ok(()),
+    }
+}
+
+/// Remove the files of folder `dir` whose name starts with `prefix` and ends with `suffix`
+/// (stale outputs of an earlier command, e.g. `view_*.png`). A missing folder is not an error.
+pub fn remove_matching(dir: &Path, prefix: &str, suffix: &str) -> Result<()> {
+    let rd = match std::fs::read_dir(dir) {
+        Ok(rd) => rd,
+        Err(_) => return Ok(()),
+    };
+    for e in rd {
+        let e = e.map_err(|e| Error::io(dir, e))?;
+        let name = e.file_name().to_string_lossy().to_string();
+        if name.starts_with(prefix) && name.ends_with(suffix) && e.path().is_file() {
+            std::fs::remove_file(e.path()).map_err(|err| Error::io(e.path(), err))?;
+        }
+    }
+    Ok(())
+}
+
+/// Error when the input file `input` is one of the files `outputs` a command is about to
+/// write (compared after resolving symlinks and `..`), so that no command overwrites its own
+/// input. `field` names the input flag.
+pub fn check_not_output(field: &str, input: &Path, outputs: &[PathBuf]) -> Result<()> {
+    let Ok(inp) = input.canonicalize() else {
+        return Ok(());
+    };
+    for o in outputs {
+        let same = match o.canonicalize() {
+            Ok(c) => c == inp,
+            // Not there yet: compare the canonical parent plus the name.
+            Err(_) => match (o.parent().map(|p| p.canonicalize()), o.file_name()) {
+                (Some(Ok(p)), Some(n)) => p.join(n) == inp,
+                _ => false,
+            },
+        };
+        if same {
+            return Err(Error::invalid(
+                field,
+                format!(
+                    "{} is also an output of this command and would be overwritten; write to \
+                     another folder",
+                    input.display()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn atomic_write_replaces_and_leaves_no_temporary() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("a.json");
+        write_atomic(&p, b"one").unwrap();
+        write_atomic(&p, b"two").unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"two");
+        assert!(!temp_path(&p).exists());
+    }
+
+    #[test]
+    fn failed_write_keeps_the_old_file() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("a.json");
+        write_atomic(&p, b"old").unwrap();
+        // The temporary name is taken by a folder: creating it fails.
+        std::fs::create_dir(temp_path(&p)).unwrap();
+        assert!(write_atomic(&p, b"new").is_err());
+        assert_eq!(std::fs::read(&p).unwrap(), b"old");
+    }
+
+    #[test]
+    fn an_input_among_the_outputs_is_refused() {
+        let d = tempfile::tempdir().unwrap();
+        let v = d.path().join("volume.npy");
+        std::fs::write(&v, b"x").unwrap();
+        let dotted = d.path().join(".").join("volume.npy");
+        let e = check_not_output("--volume", &dotted, std::slice::from_ref(&v)).unwrap_err();
+        assert!(e.to_string().contains("--volume"), "{e}");
+        assert!(check_not_output("--volume", &v, &[d.path().join("train.npy")]).is_ok());
+    }
+}

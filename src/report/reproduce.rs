@@ -1,0 +1,539 @@
+//! Charts and `report.html` of a `unispine reproduce` output folder, from its result rows (and
+//! the runs' `log.csv`): test PSNR against training time and against render fps (mean +- sd per
+//! method, every seed as a dot), test PSNR against the Gaussian count, training curves with a
+//! band over seeds, and the stability map. `report.html` is one self-contained page (inline
+//! SVG, no script, no server).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use super::svg::{self, Band, Dot, ErrorBar, Line, Marker, Panel};
+use crate::error::{Error, Result};
+use crate::reproduce::aggregate::Row;
+use crate::reproduce::verdict::mean_sd;
+
+/// Methods in first-appearance order (their colour index is the position).
+fn methods(rows: &[Row]) -> Vec<String> {
+    let mut m: Vec<String> = Vec::new();
+    for r in rows {
+        if !m.contains(&r.method) {
+            m.push(r.method.clone());
+        }
+    }
+    m
+}
+
+fn datasets(rows: &[Row]) -> Vec<String> {
+    let mut d: Vec<String> = Vec::new();
+    for r in rows {
+        if !d.contains(&r.dataset) {
+            d.push(r.dataset.clone());
+        }
+    }
+    d
+}
+
+/// Mean, and mean +- sd (the mean alone for one value).
+fn spread(v: &[f64]) -> Option<(f64, f64, f64)> {
+    let (m, sd, n) = mean_sd(v);
+    match n {
+        0 => None,
+        1 => Some((m, m, m)),
+        _ => Some((m, m - sd, m + sd)),
+    }
+}
+
+/// Speed against accuracy on one dataset: test PSNR against training time and against fps.
+pub fn tradeoff(rows: &[Row], dataset: &str) -> String {
+    let ms = methods(rows);
+    let mut time = Panel {
+        title: format!("{dataset}: PSNR against training time"),
+        x_label: "training wall time (s), mean ± sd".into(),
+        y_label: "test PSNR (dB)".into(),
+        ..Default::default()
+    };
+    let mut fps = Panel {
+        title: format!("{dataset}: PSNR against render speed"),
+        x_label: "render speed (test views / s), mean ± sd".into(),
+        y_label: "test PSNR (dB)".into(),
+        ..Default::default()
+    };
+    for (ci, m) in ms.iter().enumerate() {
+        let rs: Vec<&Row> = rows
+            .iter()
+            .filter(|r| r.dataset == dataset && r.method == *m && r.psnr.is_some())
+            .collect();
+        let p: Vec<f64> = rs.iter().filter_map(|r| r.psnr).collect();
+        let Some((pm, plo, phi)) = spread(&p) else {
+            continue;
+        };
+        for (panel, xs) in [
+            (
+                &mut time,
+                rs.iter().map(|r| r.train_time_s).collect::<Vec<_>>(),
+            ),
+            (&mut fps, rs.iter().map(|r| r.fps).collect::<Vec<_>>()),
+        ] {
+            let x: Vec<f64> = xs.iter().flatten().copied().collect();
+            let Some((xm, xlo, xhi)) = spread(&x) else {
+                continue;
+            };
+            for (r, xv) in rs.iter().zip(&xs) {
+                if let (Some(xv), Some(y)) = (xv, r.psnr) {
+                    panel.dots.push(Dot {
+                        x: *xv,
+                        y,
+                        colour: ci,
+                    });
+                }
+            }
+            panel.error_bars.push(ErrorBar {
+                x: (xlo, xhi),
+                y: (plo, phi),
+                colour: ci,
+            });
+            panel.markers.push(Marker {
+                label: m.clone(),
+                x: xm,
+                y: pm,
+                colour: ci,
+            });
+        }
+    }
+    svg::figure(&[time, fps])
+}
+
+/// Test PSNR against the final Gaussian count on one dataset: a line per method over the sweep
+/// values (mean), each run as a dot.
+pub fn psnr_vs_count(rows: &[Row], dataset: &str) -> String {
+    let ms = methods(rows);
+    let mut p = Panel {
+        title: format!("{dataset}: PSNR against Gaussian count"),
+        x_label: "Gaussians at the end of training (log scale)".into(),
+        y_label: "test PSNR (dB)".into(),
+        ..Default::default()
+    };
+    // A log axis only when the counts span more than a decade.
+    let counts: Vec<f64> = rows
+        .iter()
+        .filter(|r| r.dataset == dataset)
+        .filter_map(|r| r.n_gaussians.map(|n| n as f64))
+        .collect();
+    let (lo, hi) = counts
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |a, &c| (a.0.min(c), a.1.max(c)));
+    p.log_x = lo > 0.0 && hi / lo > 10.0;
+    if !p.log_x {
+        p.x_label = "Gaussians at the end of training".into();
+    }
+    for (ci, m) in ms.iter().enumerate() {
+        let rs: Vec<&Row> = rows
+            .iter()
+            .filter(|r| r.dataset == dataset && r.method == *m && r.psnr.is_some())
+            .collect();
+        let mut sweep: Vec<Option<String>> = Vec::new();
+        for r in &rs {
+            p.dots.push(Dot {
+                x: r.n_gaussians.unwrap_or(0) as f64,
+                y: r.psnr.unwrap_or(f64::NAN),
+                colour: ci,
+            });
+            if !sweep.contains(&r.sweep_value) {
+                sweep.push(r.sweep_value.clone());
+            }
+        }
+        let mut pts: Vec<(f64, f64)> = sweep
+            .iter()
+            .filter_map(|v| {
+                let g: Vec<&&Row> = rs.iter().filter(|r| r.sweep_value == *v).collect();
+                let n: Vec<f64> = g
+                    .iter()
+                    .filter_map(|r| r.n_gaussians.map(|x| x as f64))
+                    .collect();
+                let y: Vec<f64> = g.iter().filter_map(|r| r.psnr).collect();
+                Some((mean_sd(&n).0, mean_sd(&y).0)).filter(|p| p.0.is_finite())
+            })
+            .collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        p.lines.push(Line {
+            label: m.clone(),
+            points: pts,
+        });
+    }
+    svg::figure(&[p])
+}
+
+/// Training curves on one dataset: training-view PSNR (moving mean over 2 % of the run) per
+/// method, mean over seeds with a band of +- sd; the runs' `log.csv` files are read from `out`.
+pub fn curves(rows: &[Row], dataset: &str, out: &Path) -> String {
+    let ms = methods(rows);
+    // With a sweep, the curves of its last value (e.g. the most views, the largest budget).
+    let shown = rows
+        .iter()
+        .rev()
+        .find(|r| r.dataset == dataset && r.psnr.is_some())
+        .and_then(|r| r.sweep_value.clone());
+    let which = match (&shown, rows.iter().find_map(|r| r.sweep_flag.clone())) {
+        (Some(v), Some(f)) => format!(", {f} = {v}"),
+        _ => String::new(),
+    };
+    let mut p = Panel {
+        title: format!("{dataset}: training curves{which} (band: ± sd over seeds)"),
+        x_label: "iteration".into(),
+        y_label: "training-view PSNR (dB), moving mean".into(),
+        ..Default::default()
+    };
+    for (ci, m) in ms.iter().enumerate() {
+        let mut series: Vec<Vec<(f64, f64)>> = Vec::new();
+        for r in rows
+            .iter()
+            .filter(|r| r.dataset == dataset && r.method == *m && r.psnr.is_some())
+            .filter(|r| r.sweep_value == shown)
+        {
+            let Ok(log) = super::read_log(&out.join(&r.run_dir)) else {
+                continue;
+            };
+            let psnr: Vec<f64> = log.iter().map(|x| x.1).collect();
+            let sm = super::moving_mean(&psnr, log.len().div_ceil(50));
+            series.push(log.iter().zip(&sm).map(|(x, s)| (x.0, *s)).collect());
+        }
+        let Some(len) = series.iter().map(|s| s.len()).min() else {
+            continue;
+        };
+        let mut mean = Vec::new();
+        let mut band = Vec::new();
+        for i in 0..len {
+            let v: Vec<f64> = series.iter().map(|s| s[i].1).collect();
+            let (mu, sd, n) = mean_sd(&v);
+            let sd = if n > 1 { sd } else { 0.0 };
+            mean.push((series[0][i].0, mu));
+            band.push((series[0][i].0, mu - sd, mu + sd));
+        }
+        p.bands.push(Band {
+            points: super::thin(&band, 300),
+            colour: ci,
+        });
+        p.lines.push(Line {
+            label: format!("{m} (n = {})", series.len()),
+            points: super::thin(&mean, 300),
+        });
+    }
+    svg::figure(&[p])
+}
+
+/// Colour of a PSNR on the map's scale [lo, hi] (light yellow -> dark blue).
+fn heat(v: f64, lo: f64, hi: f64) -> String {
+    let t = if hi > lo {
+        ((v - lo) / (hi - lo)).clamp(0.0, 1.0)
+    } else {
+        0.5
+    };
+    let a = [255.0, 247.0, 188.0];
+    let b = [8.0, 64.0, 129.0];
+    let c: Vec<u8> = (0..3)
+        .map(|k| (a[k] + t * (b[k] - a[k])).round() as u8)
+        .collect();
+    format!("#{:02x}{:02x}{:02x}", c[0], c[1], c[2])
+}
+
+/// The stability map: one row per (dataset, method), one column per sweep value; each cell
+/// shows the mean test PSNR over seeds, "×" when a seed diverged or failed, and a red frame
+/// when a seed fell below `floor_db`.
+pub fn stability_map(rows: &[Row], floor_db: Option<f64>) -> String {
+    let ms = methods(rows);
+    let ds = datasets(rows);
+    let mut cols: Vec<Option<String>> = Vec::new();
+    for r in rows {
+        if !cols.contains(&r.sweep_value) {
+            cols.push(r.sweep_value.clone());
+        }
+    }
+    let flag = rows
+        .iter()
+        .find_map(|r| r.sweep_flag.clone())
+        .unwrap_or_else(|| "setting".into());
+    let all: Vec<f64> = rows.iter().filter_map(|r| r.psnr).collect();
+    let lo = all.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = all.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let (cw, ch, left, top) = (90.0, 34.0, 230.0, 70.0);
+    let nrow = ds.len() * ms.len();
+    let width = left + cw * cols.len() as f64 + 30.0;
+    let height = top + ch * nrow as f64 + 80.0;
+    let mut s = format!(
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="DejaVu Sans, Arial, sans-serif">
+<rect width="100%" height="100%" fill="white"/>
+<text x="{:.1}" y="22" font-size="15" font-weight="bold" text-anchor="middle">Stability: mean test PSNR (dB) over seeds</text>
+<text x="{:.1}" y="{:.1}" font-size="13" text-anchor="middle">{}</text>
+"#,
+        width / 2.0,
+        left + cw * cols.len() as f64 / 2.0,
+        top - 12.0,
+        svg::escape(&flag)
+    );
+    for (j, c) in cols.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            r#"<text x="{:.1}" y="{:.1}" font-size="12" text-anchor="middle">{}</text>"#,
+            left + cw * (j as f64 + 0.5),
+            top - 30.0 + 34.0 - 16.0,
+            svg::escape(c.as_deref().unwrap_or("-"))
+        );
+    }
+    let mut i = 0;
+    for d in &ds {
+        for m in &ms {
+            let y = top + ch * i as f64;
+            let _ = writeln!(
+                s,
+                r#"<text x="{:.1}" y="{:.1}" font-size="12" text-anchor="end">{} / {}</text>"#,
+                left - 8.0,
+                y + ch / 2.0 + 4.0,
+                svg::escape(d),
+                svg::escape(m)
+            );
+            for (j, c) in cols.iter().enumerate() {
+                let x = left + cw * j as f64;
+                let rs: Vec<&Row> = rows
+                    .iter()
+                    .filter(|r| r.dataset == *d && r.method == *m && r.sweep_value == *c)
+                    .collect();
+                let ok: Vec<f64> = rs.iter().filter_map(|r| r.psnr).collect();
+                let failed = rs.iter().filter(|r| r.status == "failed").count();
+                let below = floor_db.map_or(0, |f| ok.iter().filter(|&&p| p < f).count());
+                let (fill, label) = if ok.is_empty() {
+                    ("#eeeeee".to_string(), "-".to_string())
+                } else {
+                    let m = mean_sd(&ok).0;
+                    (heat(m, lo, hi), format!("{m:.1}"))
+                };
+                let dark = !ok.is_empty() && (mean_sd(&ok).0 - lo) > 0.6 * (hi - lo);
+                let _ = writeln!(
+                    s,
+                    r##"<rect class="cell" x="{x:.1}" y="{y:.1}" width="{cw:.1}" height="{ch:.1}" fill="{fill}" stroke="{}" stroke-width="{}"><title>{d} / {m} / {}: {} of {} seeds finished, {failed} failed, {below} below the floor</title></rect>"##,
+                    if below > 0 { "#d00000" } else { "#ffffff" },
+                    if below > 0 { 3 } else { 1 },
+                    svg::escape(c.as_deref().unwrap_or("-")),
+                    ok.len(),
+                    rs.len()
+                );
+                let _ = writeln!(
+                    s,
+                    r#"<text x="{:.1}" y="{:.1}" font-size="13" text-anchor="middle" fill="{}">{}{}</text>"#,
+                    x + cw / 2.0,
+                    y + ch / 2.0 + 5.0,
+                    if dark { "white" } else { "black" },
+                    label,
+                    if failed > 0 {
+                        format!(" ×{failed}")
+                    } else {
+                        String::new()
+                    }
+                );
+            }
+            i += 1;
+        }
+    }
+    let ly = top + ch * nrow as f64 + 28.0;
+    let _ = writeln!(
+        s,
+        r##"<text x="{left:.1}" y="{ly:.1}" font-size="12">×k: k seeds diverged or failed; red frame: a seed ended below {}; colour: {lo:.1} dB (light) to {hi:.1} dB (dark)</text>"##,
+        floor_db.map_or("the floor (none set)".to_string(), |f| format!("{f} dB"))
+    );
+    s.push_str("</svg>\n");
+    s
+}
+
+/// The charts of a reproduce folder: (file name, title, SVG), in report order.
+pub fn charts(rows: &[Row], out: &Path, floor_db: Option<f64>) -> Vec<(String, String, String)> {
+    let mut v = Vec::new();
+    let sweep_flag = rows.iter().find_map(|r| r.sweep_flag.clone());
+    for d in datasets(rows) {
+        if !rows.iter().any(|r| r.dataset == d && r.psnr.is_some()) {
+            continue;
+        }
+        v.push((
+            format!("tradeoff_{d}.svg"),
+            format!("{d}: speed against accuracy"),
+            tradeoff(rows, &d),
+        ));
+        v.push((
+            format!("gaussians_{d}.svg"),
+            format!("{d}: PSNR against Gaussian count"),
+            psnr_vs_count(rows, &d),
+        ));
+        v.push((
+            format!("curves_{d}.svg"),
+            format!("{d}: training curves"),
+            curves(rows, &d, out),
+        ));
+    }
+    if sweep_flag.is_some() || floor_db.is_some() {
+        v.push((
+            "stability.svg".into(),
+            "Stability map".into(),
+            stability_map(rows, floor_db),
+        ));
+    }
+    v
+}
+
+/// Markdown (as written in `tables.md`: headings, paragraphs, lists, pipe tables) to HTML.
+pub fn markdown_to_html(md: &str) -> String {
+    let inline = |t: &str| -> String {
+        let e = svg::escape(t);
+        let mut out = String::new();
+        let mut code = false;
+        let mut bold = false;
+        let mut rest = e.as_str();
+        while !rest.is_empty() {
+            if let Some(r) = rest.strip_prefix("**") {
+                out.push_str(if bold { "</b>" } else { "<b>" });
+                bold = !bold;
+                rest = r;
+            } else if let Some(r) = rest.strip_prefix('`') {
+                out.push_str(if code { "</code>" } else { "<code>" });
+                code = !code;
+                rest = r;
+            } else {
+                let c = rest.chars().next().unwrap_or(' ');
+                out.push(c);
+                rest = &rest[c.len_utf8()..];
+            }
+        }
+        if code {
+            out.push_str("</code>");
+        }
+        if bold {
+            out.push_str("</b>");
+        }
+        out
+    };
+    let mut h = String::new();
+    let mut in_table = false;
+    let mut in_list = false;
+    let mut header_done = false;
+    for line in md.lines() {
+        let t = line.trim();
+        if t.starts_with('|') {
+            if in_list {
+                h.push_str("</ul>\n");
+                in_list = false;
+            }
+            if !in_table {
+                h.push_str("<table>\n");
+                in_table = true;
+                header_done = false;
+            }
+            let cells: Vec<&str> = t.trim_matches('|').split('|').map(|c| c.trim()).collect();
+            if cells
+                .iter()
+                .all(|c| c.chars().all(|ch| ch == '-' || ch == ':'))
+            {
+                header_done = true;
+                continue;
+            }
+            let tag = if header_done { "td" } else { "th" };
+            h.push_str("<tr>");
+            for c in cells {
+                let _ = write!(h, "<{tag}>{}</{tag}>", inline(c));
+            }
+            h.push_str("</tr>\n");
+            continue;
+        }
+        if in_table {
+            h.push_str("</table>\n");
+            in_table = false;
+        }
+        if let Some(item) = t.strip_prefix("- ") {
+            if !in_list {
+                h.push_str("<ul>\n");
+                in_list = true;
+            }
+            let _ = writeln!(h, "<li>{}</li>", inline(item));
+            continue;
+        }
+        if in_list {
+            h.push_str("</ul>\n");
+            in_list = false;
+        }
+        if t.is_empty() {
+            continue;
+        }
+        if let Some(x) = t.strip_prefix("## ") {
+            let _ = writeln!(h, "<h2>{}</h2>", inline(x));
+        } else if let Some(x) = t.strip_prefix("# ") {
+            let _ = writeln!(h, "<h1>{}</h1>", inline(x));
+        } else {
+            let _ = writeln!(h, "<p>{}</p>", inline(t));
+        }
+    }
+    if in_table {
+        h.push_str("</table>\n");
+    }
+    if in_list {
+        h.push_str("</ul>\n");
+    }
+    h
+}
+
+/// Write the charts into `out/charts/` and `out/report.html`; returns the chart paths.
+pub fn write_report(
+    rows: &[Row],
+    out: &Path,
+    tables_md: &str,
+    floor_db: Option<f64>,
+) -> Result<Vec<std::path::PathBuf>> {
+    let dir = out.join("charts");
+    std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+    let cs = charts(rows, out, floor_db);
+    let mut paths = Vec::new();
+    let mut body = String::new();
+    for (name, title, svg) in &cs {
+        let p = dir.join(name);
+        std::fs::write(&p, svg).map_err(|e| Error::io(&p, e))?;
+        paths.push(p);
+        let _ = writeln!(
+            body,
+            "<figure><figcaption>{}</figcaption>\n{}</figure>",
+            svg::escape(title),
+            svg
+        );
+    }
+    let html = format!(
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+         <title>unispine reproduce</title><style>\
+         body{{font-family:DejaVu Sans,Arial,sans-serif;max-width:1150px;margin:1.5em auto;\
+         padding:0 1em;color:#222;line-height:1.4}}\
+         table{{border-collapse:collapse;margin:0.6em 0 1.2em;font-size:14px}}\
+         td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}}\
+         td:first-child,th:first-child{{text-align:left}}th{{background:#f0f0f0}}\
+         figure{{margin:1.5em 0;overflow-x:auto}}figcaption{{font-weight:bold;margin-bottom:0.3em}}\
+         code{{background:#f4f4f4;padding:0 3px}}h2{{border-bottom:1px solid #ddd}}\
+         </style></head><body>\n{}\n<h2>Charts</h2>\n{}</body></html>\n",
+        markdown_to_html(tables_md),
+        body
+    );
+    let p = out.join("report.html");
+    std::fs::write(&p, html).map_err(|e| Error::io(&p, e))?;
+    Ok(paths)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn markdown_tables_become_html_tables() {
+        let h = markdown_to_html("# T\n\n| a | b |\n|---|---:|\n| x | **1** |\n\n- `c` & d\n");
+        assert!(h.contains("<h1>T</h1>"));
+        assert!(h.contains("<tr><th>a</th><th>b</th></tr>"));
+        assert!(h.contains("<tr><td>x</td><td><b>1</b></td></tr>"));
+        assert!(h.contains("<li><code>c</code> &amp; d</li>"));
+    }
+
+    #[test]
+    fn heat_runs_from_light_to_dark() {
+        assert_eq!(heat(0.0, 0.0, 1.0), "#fff7bc");
+        assert_eq!(heat(1.0, 0.0, 1.0), "#084081");
+    }
+}

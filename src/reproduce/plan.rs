@@ -1,0 +1,784 @@
+//! Reproduction plans: a TOML file naming datasets x methods x seeds with one schedule, parsed
+//! with line-numbered errors, plus the built-in plans (`quick`, `table2`, `table1`, `stability`,
+//! `compactness` and their `-full` twins).
+//!
+//! Schema (every key but the marked ones is optional):
+//!
+//! ```toml
+//! name = "ablation"                 # required
+//! iters = 3000                      # required: training iterations of every cell
+//! compress_schedule = true          # scale the paper's 20000-iteration schedule to `iters`
+//! seeds = [0, 1, 2]                 # required
+//! methods = ["3dgs", "unispine", "paper-sigmoid"]   # required: presets or variants below
+//! floor_db = 20.0                   # stability map: cells below this test PSNR are marked
+//! [train]                           # `unispine train` flags applied to every cell
+//! preview_views = 0
+//! [sweep]                           # one more axis: a `unispine train` flag and its values
+//! flag = "train-views"
+//! values = [5, 10, 25, 50]
+//! [slurm]
+//! cpus_per_task = 2
+//! mem = "4G"
+//! time = "02:00:00"
+//! [[datasets]]
+//! name = "ct-crop"                  # required
+//! path = "ct128"                    # a folder written by `unispine data` (relative to the plan)
+//! paper = "CTSpine3D"               # the paper's dataset this one stands in for (tables.md)
+//! [[datasets]]
+//! name = "phantom"
+//! data = ["phantom", "--size", "64"]  # or: arguments of `unispine data`, built once
+//! optional = true                   # skip the dataset (with a note) when it cannot be built
+//! [variants.paper-sigmoid]          # a named method = a preset plus `unispine train` flags
+//! base = "unispine"
+//! color = "rirf-paper"
+//! ```
+//!
+//! Keys of `[train]` and of a variant are `unispine train` flags without the leading `--`
+//! (`_` and `-` are the same). Every error names the file, the line and the key, and is raised
+//! before anything runs.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::error::{Error, Result};
+
+/// The `unispine train` flags a plan cannot set: the harness sets them for every cell.
+pub const HARNESS_FLAGS: [&str; 7] = [
+    "data", "out", "method", "iters", "seed", "threads", "config",
+];
+
+/// In `methods`: every preset this build's `unispine train --method` offers that the list does
+/// not name itself.
+pub const ALL_PRESETS: &str = "all-presets";
+
+/// What `unispine train` accepts: its method names and its flags (long name, takes a value).
+/// Built from the command-line definition itself ([`TrainSchema::from_cli`]), so a method or
+/// flag added to `unispine train` is known to plans without a second list.
+#[derive(Clone, Debug)]
+pub struct TrainSchema {
+    pub methods: Vec<String>,
+    /// One line of help per method (from `unispine train --help`).
+    pub method_help: Vec<(String, String)>,
+    pub flags: Vec<(String, bool)>,
+}
+
+impl TrainSchema {
+    /// The schema of this build's `unispine train`.
+    pub fn from_cli() -> Self {
+        use clap::CommandFactory;
+        let cmd = crate::cli::Cli::command();
+        let train = cmd
+            .find_subcommand("train")
+            .expect("the CLI has a train subcommand");
+        let mut methods = Vec::new();
+        let mut method_help = Vec::new();
+        let mut flags = Vec::new();
+        for a in train.get_arguments() {
+            let Some(long) = a.get_long() else { continue };
+            if long == "method" {
+                methods = a
+                    .get_possible_values()
+                    .iter()
+                    .map(|v| v.get_name().to_string())
+                    .collect();
+                method_help = a
+                    .get_possible_values()
+                    .iter()
+                    .map(|v| {
+                        let h = v.get_help().map(|h| h.to_string()).unwrap_or_default();
+                        (v.get_name().to_string(), h)
+                    })
+                    .collect();
+            }
+            flags.push((long.to_string(), a.get_action().takes_values()));
+        }
+        TrainSchema {
+            methods,
+            method_help,
+            flags,
+        }
+    }
+
+    fn flag(&self, key: &str) -> Option<&(String, bool)> {
+        let k = key.replace('_', "-");
+        self.flags.iter().find(|(f, _)| *f == k)
+    }
+}
+
+/// Where a dataset comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Source {
+    /// A dataset folder (absolute, or resolved against the plan's folder).
+    Path(PathBuf),
+    /// Arguments of `unispine data` (without `--out`), built once into `OUT/datasets/NAME`.
+    Data(Vec<String>),
+}
+
+/// One dataset of a plan.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DatasetSpec {
+    pub name: String,
+    pub source: Source,
+    /// The paper's dataset this one stands in for (`CTSpine3D`, `FeSpine3D`), if any.
+    pub paper: Option<String>,
+    /// Skip (with a note) rather than fail when the dataset cannot be built or found.
+    pub optional: bool,
+}
+
+/// A method of a plan: a preset, or a variant (preset + `unispine train` flags).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MethodSpec {
+    pub name: String,
+    pub base: String,
+    /// `unispine train` arguments of the variant (`--flag`, value pairs flattened).
+    pub args: Vec<String>,
+}
+
+/// One more axis of a plan: a `unispine train` flag and its values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sweep {
+    pub flag: String,
+    pub values: Vec<String>,
+}
+
+/// Slurm resources per array task.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SlurmSpec {
+    pub cpus_per_task: usize,
+    pub mem: String,
+    pub time: String,
+}
+
+impl Default for SlurmSpec {
+    fn default() -> Self {
+        SlurmSpec {
+            cpus_per_task: 2,
+            mem: "4G".into(),
+            time: "24:00:00".into(),
+        }
+    }
+}
+
+/// A parsed, validated plan.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plan {
+    pub name: String,
+    pub iters: usize,
+    pub compress_schedule: bool,
+    pub seeds: Vec<u64>,
+    pub methods: Vec<MethodSpec>,
+    pub datasets: Vec<DatasetSpec>,
+    /// `unispine train` arguments for every cell.
+    pub train_args: Vec<String>,
+    pub sweep: Option<Sweep>,
+    pub floor_db: Option<f64>,
+    pub slurm: SlurmSpec,
+    /// The TOML text the plan was parsed from (hashed into each cell's key).
+    pub text: String,
+}
+
+/// `unispine train` flags of a TOML table, with their spans.
+type Flags = BTreeMap<Spanned<String>, Spanned<toml::Value>>;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPlan {
+    name: Spanned<String>,
+    iters: Spanned<i64>,
+    #[serde(default)]
+    compress_schedule: bool,
+    seeds: Spanned<Vec<i64>>,
+    methods: Spanned<Vec<Spanned<String>>>,
+    #[serde(default)]
+    datasets: Vec<Spanned<RawDataset>>,
+    #[serde(default)]
+    variants: BTreeMap<Spanned<String>, Spanned<Flags>>,
+    #[serde(default)]
+    train: Flags,
+    #[serde(default)]
+    sweep: Option<Spanned<RawSweep>>,
+    #[serde(default)]
+    floor_db: Option<f64>,
+    #[serde(default)]
+    slurm: Option<RawSlurm>,
+    #[serde(default)]
+    description: Option<String>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDataset {
+    name: Spanned<String>,
+    #[serde(default)]
+    path: Option<Spanned<String>>,
+    #[serde(default)]
+    data: Option<Spanned<Vec<String>>>,
+    #[serde(default)]
+    paper: Option<String>,
+    #[serde(default)]
+    optional: bool,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSweep {
+    flag: Spanned<String>,
+    values: Vec<Spanned<toml::Value>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSlurm {
+    #[serde(default)]
+    cpus_per_task: Option<usize>,
+    #[serde(default)]
+    mem: Option<String>,
+    #[serde(default)]
+    time: Option<String>,
+}
+
+/// 1-based line of byte offset `at` in `text`.
+pub fn line_of(text: &str, at: usize) -> usize {
+    text.as_bytes()[..at.min(text.len())]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
+        + 1
+}
+
+/// A plan error at a span: `FILE: field `KEY`: line N: MSG`.
+fn err_at(file: &Path, text: &str, span: std::ops::Range<usize>, key: &str, msg: String) -> Error {
+    Error::format(
+        file,
+        key,
+        format!("line {}: {msg}", line_of(text, span.start)),
+    )
+}
+
+/// A TOML value as a command-line argument (arrays comma-joined).
+fn value_arg(v: &toml::Value) -> std::result::Result<String, String> {
+    Ok(match v {
+        toml::Value::String(s) => s.clone(),
+        toml::Value::Integer(i) => i.to_string(),
+        toml::Value::Float(f) => f.to_string(),
+        toml::Value::Boolean(b) => b.to_string(),
+        toml::Value::Array(a) => a
+            .iter()
+            .map(value_arg)
+            .collect::<std::result::Result<Vec<_>, _>>()?
+            .join(","),
+        other => return Err(format!("`{other}` is not a flag value")),
+    })
+}
+
+/// Turn `[train]`-style flags into arguments, checking each against the schema.
+fn flags_to_args(
+    file: &Path,
+    text: &str,
+    section: &str,
+    flags: &Flags,
+    schema: &TrainSchema,
+) -> Result<Vec<String>> {
+    let mut args = Vec::new();
+    for (k, v) in flags {
+        let key = k.get_ref().as_str();
+        let at = |msg: String| err_at(file, text, k.span(), &format!("{section}.{key}"), msg);
+        if HARNESS_FLAGS.contains(&key.replace('_', "-").as_str()) {
+            return Err(at(format!(
+                "`{key}` is set by the plan itself for every cell ({})",
+                HARNESS_FLAGS.join(", ")
+            )));
+        }
+        let Some((flag, takes_value)) = schema.flag(key) else {
+            return Err(at(format!(
+                "unknown `unispine train` flag `{key}` (known: {})",
+                schema
+                    .flags
+                    .iter()
+                    .map(|f| f.0.as_str())
+                    .filter(|f| !HARNESS_FLAGS.contains(f) && *f != "help")
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        };
+        if *takes_value {
+            let val = value_arg(v.get_ref()).map_err(&at)?;
+            args.push(format!("--{flag}"));
+            args.push(val);
+        } else {
+            match v.get_ref() {
+                toml::Value::Boolean(true) => args.push(format!("--{flag}")),
+                toml::Value::Boolean(false) => {}
+                _ => return Err(at(format!("`{key}` is a switch: write true or false"))),
+            }
+        }
+    }
+    Ok(args)
+}
+
+/// Check `args` with the real `unispine train` parser; a message on failure.
+fn check_train_args(base: &str, args: &[String]) -> std::result::Result<(), String> {
+    use clap::Parser;
+    let mut argv: Vec<String> = ["unispine", "train", "--data", "D", "--out", "O", "--method"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    argv.push(base.to_string());
+    argv.extend(args.iter().cloned());
+    crate::cli::Cli::try_parse_from(argv)
+        .map(|_| ())
+        .map_err(|e| {
+            let s = e.to_string();
+            s.lines()
+                .find(|l| l.starts_with("error:"))
+                .unwrap_or(&s)
+                .trim_start_matches("error: ")
+                .to_string()
+        })
+}
+
+impl Plan {
+    /// Parse and validate plan text. `file` names it in errors; relative dataset paths are
+    /// resolved against `base_dir`.
+    pub fn parse(text: &str, file: &Path, base_dir: &Path, schema: &TrainSchema) -> Result<Plan> {
+        let raw: RawPlan = toml::from_str(text).map_err(|e| {
+            let line = e.span().map(|s| line_of(text, s.start)).unwrap_or(0);
+            Error::format(file, "plan", format!("line {line}: {}", e.message().trim()))
+        })?;
+        let _ = &raw.description;
+        let name = raw.name.get_ref().trim().to_string();
+        if name.is_empty() || name.contains(['/', '\\']) {
+            return Err(err_at(
+                file,
+                text,
+                raw.name.span(),
+                "name",
+                "must be a non-empty name without `/`".into(),
+            ));
+        }
+        let iters = *raw.iters.get_ref();
+        if iters < 1 {
+            return Err(err_at(
+                file,
+                text,
+                raw.iters.span(),
+                "iters",
+                "must be >= 1".into(),
+            ));
+        }
+        let mut seeds = Vec::new();
+        for &s in raw.seeds.get_ref() {
+            if s < 0 || seeds.contains(&(s as u64)) {
+                return Err(err_at(
+                    file,
+                    text,
+                    raw.seeds.span(),
+                    "seeds",
+                    format!("seed {s} is negative or repeated"),
+                ));
+            }
+            seeds.push(s as u64);
+        }
+        if seeds.is_empty() {
+            return Err(err_at(
+                file,
+                text,
+                raw.seeds.span(),
+                "seeds",
+                "is empty".into(),
+            ));
+        }
+        let train_args = flags_to_args(file, text, "train", &raw.train, schema)?;
+        // Variants.
+        let mut variants: BTreeMap<String, MethodSpec> = BTreeMap::new();
+        for (vname, body) in &raw.variants {
+            let vn = vname.get_ref().clone();
+            if schema.methods.contains(&vn) {
+                return Err(err_at(
+                    file,
+                    text,
+                    vname.span(),
+                    &format!("variants.{vn}"),
+                    "a variant cannot reuse a preset's name".into(),
+                ));
+            }
+            let mut flags = body.get_ref().clone();
+            let Some(base) = flags.remove("base") else {
+                return Err(err_at(
+                    file,
+                    text,
+                    body.span(),
+                    &format!("variants.{vn}"),
+                    "missing `base` (the preset it starts from)".into(),
+                ));
+            };
+            let b = match base.get_ref() {
+                toml::Value::String(s) if schema.methods.contains(s) => s.clone(),
+                other => {
+                    return Err(err_at(
+                        file,
+                        text,
+                        base.span(),
+                        &format!("variants.{vn}.base"),
+                        format!(
+                            "unknown method {other} (this build offers: {})",
+                            schema.methods.join(", ")
+                        ),
+                    ))
+                }
+            };
+            let section = format!("variants.{vn}");
+            let args = flags_to_args(file, text, &section, &flags, schema)?;
+            let mut all = train_args.clone();
+            all.extend(args.iter().cloned());
+            if let Err(m) = check_train_args(&b, &all) {
+                return Err(err_at(file, text, vname.span(), &section, m));
+            }
+            variants.insert(
+                vn.clone(),
+                MethodSpec {
+                    name: vn,
+                    base: b,
+                    args,
+                },
+            );
+        }
+        // Methods.
+        let mut methods = Vec::new();
+        let mut names: Vec<Spanned<String>> = Vec::new();
+        for m in raw.methods.get_ref() {
+            if m.get_ref() == ALL_PRESETS {
+                for p in &schema.methods {
+                    let listed = raw.methods.get_ref().iter().any(|x| x.get_ref() == p);
+                    if !listed && !names.iter().any(|x| x.get_ref() == p) {
+                        names.push(Spanned::new(m.span(), p.clone()));
+                    }
+                }
+            } else {
+                names.push(m.clone());
+            }
+        }
+        for m in &names {
+            let n = m.get_ref();
+            let spec = if let Some(v) = variants.get(n) {
+                v.clone()
+            } else if schema.methods.contains(n) {
+                MethodSpec {
+                    name: n.clone(),
+                    base: n.clone(),
+                    args: vec![],
+                }
+            } else {
+                return Err(err_at(
+                    file,
+                    text,
+                    m.span(),
+                    "methods",
+                    format!(
+                        "unknown method `{n}`: neither a preset of this build ({}) nor a \
+                         [variants.{n}] table",
+                        schema.methods.join(", ")
+                    ),
+                ));
+            };
+            if methods.iter().any(|x: &MethodSpec| x.name == *n) {
+                return Err(err_at(
+                    file,
+                    text,
+                    m.span(),
+                    "methods",
+                    format!("`{n}` is listed twice"),
+                ));
+            }
+            methods.push(spec);
+        }
+        if methods.is_empty() {
+            return Err(err_at(
+                file,
+                text,
+                raw.methods.span(),
+                "methods",
+                "is empty".into(),
+            ));
+        }
+        if let Err(m) = check_train_args("unispine", &train_args) {
+            return Err(Error::format(file, "train", m));
+        }
+        // Datasets.
+        let mut datasets: Vec<DatasetSpec> = Vec::new();
+        for d in &raw.datasets {
+            let dn = d.get_ref().name.get_ref().clone();
+            let key = format!("datasets.{dn}");
+            let at_d = |msg: String| err_at(file, text, d.span(), &key, msg);
+            if dn.is_empty() || dn.contains(['/', '\\']) || dn.starts_with('.') {
+                return Err(err_at(
+                    file,
+                    text,
+                    d.get_ref().name.span(),
+                    "datasets.name",
+                    format!("`{dn}` is not a usable folder name"),
+                ));
+            }
+            if datasets.iter().any(|x| x.name == dn) {
+                return Err(at_d(format!("dataset `{dn}` is listed twice")));
+            }
+            let raw_d = d.get_ref();
+            let source =
+                match (&raw_d.path, &raw_d.data) {
+                    (Some(p), None) => {
+                        let pb = PathBuf::from(p.get_ref());
+                        let full = if pb.is_absolute() {
+                            pb
+                        } else {
+                            base_dir.join(pb)
+                        };
+                        if !raw_d.optional && !full.join("dataset.json").is_file() {
+                            return Err(err_at(
+                                file,
+                                text,
+                                p.span(),
+                                &format!("{key}.path"),
+                                format!(
+                                    "{} is not a dataset folder (no dataset.json; make one with \
+                                 `unispine data`)",
+                                    full.display()
+                                ),
+                            ));
+                        }
+                        Source::Path(full)
+                    }
+                    (None, Some(a)) => {
+                        if a.get_ref().is_empty() {
+                            return Err(at_d("`data` is empty".into()));
+                        }
+                        if a.get_ref().iter().any(|x| x == "--out") {
+                            return Err(at_d(
+                                "`data` must not contain --out (the plan chooses it)".into(),
+                            ));
+                        }
+                        Source::Data(a.get_ref().clone())
+                    }
+                    _ => return Err(at_d(
+                        "give exactly one of `path` (a dataset folder) or `data` (arguments of \
+                         `unispine data`)"
+                            .into(),
+                    )),
+                };
+            datasets.push(DatasetSpec {
+                name: dn,
+                source,
+                paper: raw_d.paper.clone(),
+                optional: raw_d.optional,
+            });
+        }
+        if datasets.is_empty() {
+            return Err(Error::format(
+                file,
+                "datasets",
+                "missing: give at least one [[datasets]] table",
+            ));
+        }
+        // Sweep.
+        let sweep = match &raw.sweep {
+            None => None,
+            Some(s) => {
+                let s_ref = s.get_ref();
+                let key = s_ref.flag.get_ref();
+                let mut map = BTreeMap::new();
+                map.insert(
+                    s_ref.flag.clone(),
+                    Spanned::new(s.span(), toml::Value::Integer(0)),
+                );
+                // Reuse the flag checks (unknown / harness flags) with a dummy value.
+                flags_to_args(file, text, "sweep.flag", &map, schema)?;
+                let flag = key.replace('_', "-");
+                let mut values = Vec::new();
+                for v in &s_ref.values {
+                    let a = value_arg(v.get_ref())
+                        .map_err(|m| err_at(file, text, v.span(), "sweep.values", m))?;
+                    let mut args = train_args.clone();
+                    args.push(format!("--{flag}"));
+                    args.push(a.clone());
+                    if let Err(m) = check_train_args("unispine", &args) {
+                        return Err(err_at(file, text, v.span(), "sweep.values", m));
+                    }
+                    values.push(a);
+                }
+                if values.is_empty() {
+                    return Err(err_at(
+                        file,
+                        text,
+                        s.span(),
+                        "sweep.values",
+                        "is empty".into(),
+                    ));
+                }
+                Some(Sweep { flag, values })
+            }
+        };
+        let slurm = match raw.slurm {
+            None => SlurmSpec::default(),
+            Some(s) => {
+                let d = SlurmSpec::default();
+                SlurmSpec {
+                    cpus_per_task: s.cpus_per_task.unwrap_or(d.cpus_per_task).max(1),
+                    mem: s.mem.unwrap_or(d.mem),
+                    time: s.time.unwrap_or(d.time),
+                }
+            }
+        };
+        Ok(Plan {
+            name,
+            iters: iters as usize,
+            compress_schedule: raw.compress_schedule,
+            seeds,
+            methods,
+            datasets,
+            train_args,
+            sweep,
+            floor_db: raw.floor_db,
+            slurm,
+            text: text.to_string(),
+        })
+    }
+
+    /// Read a plan: a built-in name ([`builtin`]) or a TOML file.
+    pub fn load(name_or_path: &str, schema: &TrainSchema) -> Result<Plan> {
+        if let Some(text) = builtin(name_or_path) {
+            let file = PathBuf::from(format!("<built-in plan {name_or_path}>"));
+            return Plan::parse(text, &file, Path::new("."), schema);
+        }
+        let p = Path::new(name_or_path);
+        let text = std::fs::read_to_string(p).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::NotFound && !name_or_path.ends_with(".toml") {
+                Error::invalid(
+                    "PLAN",
+                    format!(
+                        "`{name_or_path}` is neither a built-in plan ({}) nor a file",
+                        BUILTIN.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
+                    ),
+                )
+            } else {
+                Error::io(p, e)
+            }
+        })?;
+        let base = p.parent().unwrap_or(Path::new(".")).to_path_buf();
+        Plan::parse(&text, p, &base, schema)
+    }
+}
+
+/// The built-in plans: name and TOML text.
+pub const BUILTIN: [(&str, &str); 10] = [
+    ("quick", include_str!("plans/quick.toml")),
+    ("table2", include_str!("plans/table2.toml")),
+    ("table2-full", include_str!("plans/table2-full.toml")),
+    ("table1", include_str!("plans/table1.toml")),
+    ("table1-full", include_str!("plans/table1-full.toml")),
+    ("stability", include_str!("plans/stability.toml")),
+    ("stability-full", include_str!("plans/stability-full.toml")),
+    ("compactness", include_str!("plans/compactness.toml")),
+    (
+        "compactness-full",
+        include_str!("plans/compactness-full.toml"),
+    ),
+    ("quick-full", include_str!("plans/quick-full.toml")),
+];
+
+/// The TOML text of a built-in plan.
+pub fn builtin(name: &str) -> Option<&'static str> {
+    BUILTIN.iter().find(|b| b.0 == name).map(|b| b.1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(t: &str) -> Result<Plan> {
+        let dir = std::env::temp_dir();
+        Plan::parse(t, Path::new("p.toml"), &dir, &TrainSchema::from_cli())
+    }
+
+    const OK: &str = "name = \"t\"\niters = 10\nseeds = [0, 1]\nmethods = [\"unispine\", \"v\"]\n\
+                      [[datasets]]\nname = \"ph\"\ndata = [\"phantom\", \"--size\", \"16\"]\n\
+                      [variants.v]\nbase = \"xgaussian\"\ncolor = \"rirf-paper\"\n";
+
+    #[test]
+    fn a_good_plan_parses() {
+        let p = parse(OK).unwrap();
+        assert_eq!(p.seeds, vec![0, 1]);
+        assert_eq!(p.methods[1].base, "xgaussian");
+        assert_eq!(p.methods[1].args, vec!["--color", "rirf-paper"]);
+        assert_eq!(
+            p.datasets[0].source,
+            Source::Data(vec!["phantom".into(), "--size".into(), "16".into()])
+        );
+    }
+
+    #[test]
+    fn errors_name_the_line_and_key() {
+        let cases = [
+            (
+                OK.replace("iters = 10", "iters = 10\nbogus = 1"),
+                "line 3",
+                "bogus",
+            ),
+            (
+                OK.replace("\"unispine\", \"v\"", "\"unispine\", \"nope\""),
+                "line 4",
+                "nope",
+            ),
+            (OK.replace("color = ", "colour = "), "line 10", "colour"),
+            (
+                OK.replace("\"rirf-paper\"", "\"purple\""),
+                "line 8",
+                "purple",
+            ),
+            (
+                OK.replace("base = \"xgaussian\"", "base = \"nerf9\""),
+                "line 9",
+                "nerf9",
+            ),
+            (
+                OK.replace("color = \"rirf-paper\"", "seed = 3"),
+                "line 10",
+                "seed",
+            ),
+        ];
+        for (text, line, word) in cases {
+            let e = parse(&text).unwrap_err().to_string();
+            assert!(e.contains(line) && e.contains(word), "{e}\n--\n{text}");
+            assert!(e.contains("p.toml"), "{e}");
+        }
+        let no_ds = "name = \"t\"\niters = 10\nseeds = [0]\nmethods = [\"unispine\"]\n";
+        let e = parse(no_ds).unwrap_err().to_string();
+        assert!(e.contains("datasets"), "{e}");
+        let missing = OK.replace(
+            "data = [\"phantom\", \"--size\", \"16\"]",
+            "path = \"no/such\"",
+        );
+        let e = parse(&missing).unwrap_err().to_string();
+        assert!(e.contains("line 7") && e.contains("no/such"), "{e}");
+    }
+
+    #[test]
+    fn every_builtin_plan_parses() {
+        let schema = TrainSchema::from_cli();
+        for (name, text) in BUILTIN {
+            // Paths of built-in plans may be absent here; only optional datasets use `path`.
+            let p = Plan::parse(text, Path::new(name), Path::new("."), &schema)
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(p.name, name);
+        }
+    }
+
+    #[test]
+    fn schema_lists_the_presets() {
+        let s = TrainSchema::from_cli();
+        for m in ["unispine", "xgaussian", "3dgs", "spwm-only"] {
+            assert!(s.methods.iter().any(|x| x == m), "{m} in {:?}", s.methods);
+        }
+    }
+}

@@ -1,0 +1,225 @@
+//! `unispine reproduce`: running a tiny plan, resuming it, bit-identical results for any
+//! `--jobs`, failing cells recorded while the others go on, collecting partial results, and
+//! plan errors naming the line.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+const BIN: &str = env!("CARGO_BIN_EXE_unispine");
+
+fn reproduce(args: &[&str], cwd: &Path) -> Output {
+    Command::new(BIN)
+        .arg("reproduce")
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run unispine")
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// A plan small enough for the test suite: a 32^3 phantom, 32 x 32 detector, 10 training
+/// views, 30 iterations.
+fn tiny_plan(iters: usize, extra: &str) -> String {
+    format!(
+        "name = \"tiny\"\niters = {iters}\ncompress_schedule = true\nseeds = [0, 1]\n\
+         methods = [\"xgaussian\", \"unispine\"{extra_m}]\n[train]\npreview_views = 0\n\
+         [[datasets]]\nname = \"ph\"\n\
+         data = [\"phantom\", \"--size\", \"32\", \"--detector\", \"32\", \"--train-views\", \
+         \"10\", \"--test-views\", \"4\"]\n{extra}",
+        extra_m = if extra.is_empty() { "" } else { ", \"broken\"" },
+    )
+}
+
+/// Columns that must be bit-identical between runs: (cell, psnr, ssim, n_gaussians).
+fn deterministic_columns(csv: &str) -> Vec<String> {
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |n: &str| header.iter().position(|h| *h == n).unwrap();
+    let (d, m, s, p, q, g) = (
+        col("dataset"),
+        col("method"),
+        col("seed"),
+        col("psnr"),
+        col("ssim"),
+        col("n_gaussians"),
+    );
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            format!("{}/{}/{} {} {} {}", f[d], f[m], f[s], f[p], f[q], f[g])
+        })
+        .collect()
+}
+
+#[test]
+fn a_plan_runs_resumes_and_does_not_depend_on_jobs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    std::fs::write(dir.join("plan.toml"), tiny_plan(30, "")).unwrap();
+
+    let o = reproduce(&["plan.toml", "--out", "a", "--jobs", "1"], dir);
+    assert!(o.status.success(), "{}", text(&o));
+    let t = text(&o);
+    assert!(t.contains("[cell 4/4]") && t.contains("left"), "{t}");
+    let csv_a = std::fs::read_to_string(dir.join("a/results.csv")).unwrap();
+    let cols_a = deterministic_columns(&csv_a);
+    assert_eq!(cols_a.len(), 4);
+    for c in &cols_a {
+        assert!(!c.contains("  "), "a cell without a result: {c}\n{csv_a}");
+    }
+    assert!(csv_a.contains(",done,true,"), "{csv_a}");
+    for f in ["tables.md", "results.json"] {
+        assert!(dir.join("a").join(f).is_file(), "{f}");
+    }
+    let md = std::fs::read_to_string(dir.join("a/tables.md")).unwrap();
+    assert!(md.contains("| xgaussian | 2 of 2 |"), "{md}");
+    assert!(md.contains("SPWM improves on X-Gaussian"), "{md}");
+
+    // Run again: every cell is kept, nothing retrains.
+    let ply = dir.join("a/runs/ph/unispine/seed1/model.ply");
+    let before = std::fs::metadata(&ply).unwrap().modified().unwrap();
+    let o = reproduce(&["plan.toml", "--out", "a"], dir);
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(
+        text(&o).matches("finished earlier, kept").count(),
+        4,
+        "{}",
+        text(&o)
+    );
+    assert_eq!(std::fs::metadata(&ply).unwrap().modified().unwrap(), before);
+
+    // A stopped cell is run again, the others kept.
+    let rec = dir.join("a/runs/ph/xgaussian/seed0/cell.json");
+    let r = std::fs::read_to_string(&rec).unwrap();
+    std::fs::write(&rec, r.replace("\"done\"", "\"stopped\"")).unwrap();
+    let o = reproduce(&["plan.toml", "--out", "a"], dir);
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(
+        text(&o).matches("finished earlier, kept").count(),
+        3,
+        "{}",
+        text(&o)
+    );
+    let csv_a2 = std::fs::read_to_string(dir.join("a/results.csv")).unwrap();
+    assert_eq!(
+        deterministic_columns(&csv_a2),
+        cols_a,
+        "a rerun cell changed its result"
+    );
+
+    // The same plan with two cells at once (one thread each): bit-identical results.
+    let o = reproduce(&["plan.toml", "--out", "b", "--jobs", "2"], dir);
+    assert!(o.status.success(), "{}", text(&o));
+    let csv_b = std::fs::read_to_string(dir.join("b/results.csv")).unwrap();
+    assert_eq!(deterministic_columns(&csv_b), cols_a);
+    assert!(
+        csv_b.contains(",1,"),
+        "threads column of --jobs 2 runs: {csv_b}"
+    );
+    for cell in ["xgaussian/seed0", "unispine/seed1"] {
+        let pa = std::fs::read(dir.join("a/runs/ph").join(cell).join("model.ply")).unwrap();
+        let pb = std::fs::read(dir.join("b/runs/ph").join(cell).join("model.ply")).unwrap();
+        assert!(pa == pb, "{cell}: model.ply differs between --jobs 1 and 2");
+    }
+
+    // A changed plan (more iterations) reruns its cells.
+    std::fs::write(dir.join("plan.toml"), tiny_plan(35, "")).unwrap();
+    let o = reproduce(&["plan.toml", "--out", "a", "--jobs", "2"], dir);
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(
+        text(&o).matches("finished earlier, kept").count(),
+        0,
+        "{}",
+        text(&o)
+    );
+    let csv = std::fs::read_to_string(dir.join("a/results.csv")).unwrap();
+    assert!(csv.contains(",35,done,true,"), "{csv}");
+}
+
+#[test]
+fn a_failing_cell_is_recorded_and_the_others_go_on() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    // lambda_dssim = 2 passes the flag parser but not the trainer's config check.
+    let plan = tiny_plan(
+        20,
+        "[variants.broken]\nbase = \"unispine\"\nlambda_dssim = 2.0\n",
+    );
+    std::fs::write(dir.join("plan.toml"), plan).unwrap();
+    let o = reproduce(&["plan.toml", "--out", "r"], dir);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let csv = std::fs::read_to_string(dir.join("r/results.csv")).unwrap();
+    assert_eq!(csv.matches(",done,true,").count(), 4, "{csv}");
+    assert_eq!(csv.matches(",failed,false,").count(), 2, "{csv}");
+    let md = std::fs::read_to_string(dir.join("r/tables.md")).unwrap();
+    assert!(
+        md.contains("runs/ph/broken/seed0`: failed") && md.contains("lambda_dssim"),
+        "{md}"
+    );
+
+    // Collect over partial results names the missing cells.
+    std::fs::remove_dir_all(dir.join("r/runs/ph/xgaussian/seed1")).unwrap();
+    let o = reproduce(&["plan.toml", "--out", "r", "--collect"], dir);
+    assert!(o.status.success(), "{}", text(&o));
+    let t = text(&o);
+    assert!(
+        t.contains("3 of 6 cells have no result")
+            && t.contains("runs/ph/xgaussian/seed1 (missing)"),
+        "{t}"
+    );
+}
+
+#[test]
+fn bad_plans_are_errors_naming_the_line_before_anything_runs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let good = tiny_plan(20, "");
+    let cases = [
+        (
+            good.replace("iters = 20", "iters = 20\nspeed = 3"),
+            "line 3",
+            "speed",
+        ),
+        (
+            good.replace("\"unispine\"", "\"unispine-x\""),
+            "line 5",
+            "unispine-x",
+        ),
+        (
+            format!("{good}[variants.v]\nbase = \"xgaussian\"\nwarp = 1\n"),
+            "line 13",
+            "warp",
+        ),
+        (
+            good.replace("data = [", "path = \"nowhere\"\n#"),
+            "line 10",
+            "nowhere",
+        ),
+        (good.replace("iters = 20", "iters = -4"), "line 2", "iters"),
+        ("name = \"x\"\nseeds = [0]\n".to_string(), "line", "iters"),
+    ];
+    for (plan, line, word) in cases {
+        std::fs::write(dir.join("bad.toml"), &plan).unwrap();
+        let o = reproduce(&["bad.toml", "--out", "o"], dir);
+        let t = text(&o);
+        assert_eq!(o.status.code(), Some(1), "{t}\n--\n{plan}");
+        assert!(
+            t.contains("bad.toml") && t.contains(line) && t.contains(word),
+            "{t}\n--\n{plan}"
+        );
+        assert!(!dir.join("o").exists(), "something ran for a bad plan");
+    }
+    let o = reproduce(&["no-such-plan"], dir);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).contains("quick"), "{}", text(&o));
+    let o = reproduce(&["--show", "table2"], dir);
+    assert!(o.status.success());
+    assert!(String::from_utf8_lossy(&o.stdout).contains("name = \"table2\""));
+}
