@@ -142,7 +142,38 @@ impl ConeBeam {
                 return Err(Error::invalid(format!("nDetector[{a}]"), "must be > 0"));
             }
         }
-        pos("accuracy", self.accuracy)?;
+        if !(ACCURACY_RANGE.0..=ACCURACY_RANGE.1).contains(&self.accuracy) {
+            return Err(Error::invalid(
+                "accuracy",
+                format!(
+                    "{} is outside the allowed range [{}, {}] (trilinear step = accuracy x \
+                     voxel size; TIGRE's default is 0.5)",
+                    self.accuracy, ACCURACY_RANGE.0, ACCURACY_RANGE.1
+                ),
+            ));
+        }
+        for a in 0..2 {
+            if self.n_detector[a] > MAX_DETECTOR {
+                return Err(Error::invalid(
+                    format!("nDetector[{a}]"),
+                    format!(
+                        "{} pixels is outside the allowed range [1, {MAX_DETECTOR}]",
+                        self.n_detector[a]
+                    ),
+                ));
+            }
+        }
+        for a in 0..3 {
+            if self.n_voxel[a] > MAX_VOXELS_PER_AXIS {
+                return Err(Error::invalid(
+                    format!("nVoxel[{a}]"),
+                    format!(
+                        "{} voxels is outside the allowed range [1, {MAX_VOXELS_PER_AXIS}]",
+                        self.n_voxel[a]
+                    ),
+                ));
+            }
+        }
         if self.mode == Mode::Cone && self.dsd < self.dso {
             return Err(Error::invalid(
                 "DSD",
@@ -445,3 +476,14 @@ mod tests {
         assert!(e.to_string().contains("missing.json"), "{e}");
     }
 }
+
+/// Allowed range of `accuracy` (the trilinear step in voxel sizes). Below 0.01 a ray takes
+/// over 100 samples per voxel (hours for a normal volume); above 1 samples skip voxels and far
+/// above it every ray misses the volume (all-zero projections).
+pub const ACCURACY_RANGE: (f64, f64) = (0.01, 1.0);
+
+/// Most detector pixels per axis (a 16384^2 f32 image is 1 GiB).
+pub const MAX_DETECTOR: usize = 16384;
+
+/// Most voxels per volume axis in a geometry.
+pub const MAX_VOXELS_PER_AXIS: usize = 16384;

@@ -44,14 +44,34 @@ fn nums(v: &serde_json::Value) -> Vec<f64> {
         .collect()
 }
 
-const GOOD: [(&str, u64, &str); 6] = [
+const GOOD: [(&str, u64, &str); 8] = [
     ("naf_p2_np1.pickle", 2, "numpy.core"),
     ("naf_p4_np1.pickle", 4, "numpy.core"),
     ("naf_p5_np1.pickle", 5, "numpy.core"),
     ("naf_p2_np2.pickle", 2, "numpy._core"),
     ("naf_p4_np2.pickle", 4, "numpy._core"),
     ("naf_p5_np2.pickle", 5, "numpy._core"),
+    // Protocol 5, Fortran-order image: `_frombuffer(buf, dtype, shape, 'F')`.
+    ("naf_p5_fortran_np2.pickle", 5, "numpy._core"),
+    // The image array referenced twice (a memo reference).
+    ("naf_shared_np2.pickle", 4, "numpy._core"),
 ];
+
+/// The protocol-5 Fortran fixture really stores its image through `_frombuffer` with order
+/// 'F' (so `every_fixture_gives_every_value` fails if that order were read as C order).
+#[test]
+fn protocol5_fortran_fixture_uses_frombuffer_with_order_f() {
+    let b = std::fs::read(fixture("naf_p5_fortran_np2.pickle")).unwrap();
+    let has = |pat: &[u8]| b.windows(pat.len()).any(|w| w == pat);
+    assert!(has(b"_frombuffer"));
+    // SHORT_BINUNICODE of length 1: "F".
+    assert!(has(&[0x8c, 1, b'F']), "no 'F' order argument");
+    // The image is not symmetric under a C/Fortran mix-up: read in C order, voxel (1, 0, 0)
+    // would hold the value of voxel (0, 0, 1).
+    let e = expected();
+    let img = values(&e["image"]);
+    assert_ne!(img[12], img[1]);
+}
 
 #[test]
 fn every_fixture_gives_every_value() {

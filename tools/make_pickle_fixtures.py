@@ -16,7 +16,9 @@ writes the files of its own version:
     python3 tools/make_pickle_fixtures.py            # -> tests/fixtures/naf_p{2,4,5}_np{1|2}.pickle
 
 It also writes `naf_expected.json` (every value of the dict as plain JSON, the same for every
-fixture) and, with numpy 2.x, the bad fixtures (`bad_*.pickle`) whose errors the tests check.
+fixture) and, with numpy 2.x, a protocol-5 file with a Fortran-order image
+(`naf_p5_fortran_np2.pickle`), one that references an array twice (`naf_shared_np2.pickle`),
+and the bad fixtures (`bad_*.pickle`) whose errors the tests check.
 """
 import json
 import os
@@ -108,6 +110,13 @@ def main():
         d = naf_dict()
         d["image"] = np.ascontiguousarray(d["image"][:1, :, ::2])
         dump("naf_small_image.pickle", d, 4)
+        # Protocol 5 with a Fortran-order image: numpy 2 writes
+        # `_frombuffer(buf, dtype, shape, 'F')`, whose buffer is in Fortran order.
+        dump("naf_p5_fortran_np2.pickle", naf_dict(fortran_image=True), 5)
+        # One array referenced twice (pickle's memo): valid, and must be accepted.
+        d = naf_dict()
+        d["image_again"] = d["image"]
+        dump("naf_shared_np2.pickle", d, 4)
         d = naf_dict()
         del d["DSO"]
         dump("bad_missing_dso.pickle", d, 4)

@@ -48,6 +48,16 @@ pub struct TrainArgs {
 /// Set up rayon's global pool with `threads` threads (no-op when `None`).
 pub fn init_threads(threads: Option<usize>) -> anyhow::Result<()> {
     if let Some(t) = threads {
+        // Results do not depend on the thread count; more threads than 8 x the cores only
+        // costs memory (each has a stack) and time.
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if t == 0 || t > 8 * cores {
+            anyhow::bail!(
+                "invalid `--threads`: {t} is outside the allowed range [1, {}] (8 x the {cores} \
+                 cores)",
+                8 * cores
+            );
+        }
         rayon::ThreadPoolBuilder::new()
             .num_threads(t)
             .build_global()

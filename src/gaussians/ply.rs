@@ -11,7 +11,7 @@
 //! rest coefficients per channel). Files with fewer `f_rest` fields (lower SH degree) load with
 //! the missing features at zero.
 
-use std::io::{BufRead, BufReader, Read};
+use std::io::{BufRead, BufReader, Read, Seek};
 use std::path::Path;
 
 use ndarray::{Array1, Array2};
@@ -161,11 +161,34 @@ pub fn read_ply_with_comments<R: Real>(path: &Path) -> Result<(Gaussians<R>, Vec
 pub fn read_ply_full<R: Real>(path: &Path) -> Result<(Gaussians<R>, FeatureLayout, Vec<String>)> {
     let mut comments = Vec::new();
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let meta = file.metadata().map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        return Err(Error::format(
+            path,
+            "file",
+            "not a regular file: only regular files are read",
+        ));
+    }
+    let file_len = meta.len();
     let mut rd = BufReader::new(file);
     let mut line = String::new();
-    let read_line = |rd: &mut BufReader<std::fs::File>, line: &mut String| -> Result<()> {
+    let mut header_bytes = 0usize;
+    let mut read_line = |rd: &mut BufReader<std::fs::File>, line: &mut String| -> Result<()> {
         line.clear();
-        let n = rd.read_line(line).map_err(|e| Error::io(path, e))?;
+        // A header line is at most 4 KiB and the header at most 1 MiB.
+        let n = rd
+            .by_ref()
+            .take(4096)
+            .read_line(line)
+            .map_err(|e| Error::format(path, "header", format!("not a text line: {e}")))?;
+        header_bytes += n;
+        if header_bytes > 1 << 20 || (n == 4096 && !line.ends_with('\n')) {
+            return Err(Error::format(
+                path,
+                "header",
+                "header line over 4 KiB or header over 1 MiB: not a PLY header",
+            ));
+        }
         if n == 0 {
             return Err(Error::format(
                 path,
@@ -272,10 +295,33 @@ pub fn read_ply_full<R: Real>(path: &Path) -> Result<(Gaussians<R>, FeatureLayou
     }
 
     let mut values = vec![0f64; props.len()];
+    // Claimed sizes are checked against the file length before anything is allocated: a
+    // binary vertex takes `stride` bytes, an ascii one at least 2 bytes per property.
+    let stride: usize = props.iter().map(|(_, t)| t.size()).sum();
+    let per_vertex = if format == "ascii" {
+        2 * props.len()
+    } else {
+        stride
+    };
+    let body_len = file_len.saturating_sub(rd.stream_position().map_err(|e| Error::io(path, e))?);
+    match n.checked_mul(per_vertex) {
+        Some(b) if b as u64 <= body_len.saturating_add(1) => {}
+        _ => {
+            return Err(Error::format(
+                path,
+                "element vertex",
+                format!(
+                    "{n} vertices of at least {per_vertex} bytes do not fit in the {body_len} \
+                     bytes after the header (a false count, or a truncated file)"
+                ),
+            ))
+        }
+    }
     let mut g = Gaussians::<R>::zeros(n);
     let mut body = Vec::new();
-    rd.read_to_end(&mut body).map_err(|e| Error::io(path, e))?;
-    let stride: usize = props.iter().map(|(_, t)| t.size()).sum();
+    rd.take(body_len)
+        .read_to_end(&mut body)
+        .map_err(|e| Error::io(path, e))?;
     let mut ascii = match format.as_str() {
         "ascii" => Some(
             std::str::from_utf8(&body)

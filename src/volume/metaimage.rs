@@ -9,7 +9,13 @@
 //! gzip when the stream starts with the gzip magic), `CompressedDataSize`, `HeaderSize` (bytes to
 //! skip in a separate data file; -1 = the data is the end of the file), `Offset` (or `Position`,
 //! `Origin`), `TransformMatrix` (or `Rotation`, `Orientation`), `ElementDataFile` (`LOCAL` or a
-//! file name relative to the header's folder; `LIST` and file patterns are not supported).
+//! plain file name in the header's folder; `LIST` and file patterns are not supported).
+//!
+//! Input limits: the text header must end (with `ElementDataFile`) within 1 MiB; a separate data
+//! file must be a regular file beside the header (a name with a folder part, `..` or an absolute
+//! path is refused, so is a device such as `/dev/zero`); the claimed data size is checked against
+//! the bytes present before decoding. An affine with a NaN or infinite entry is dropped with a
+//! note in the provenance.
 //!
 //! The recorded affine is `world = Offset + sum_a index_a * spacing_a * TM[a]`, where `TM[a]`
 //! is row `a` of TransformMatrix as written (the direction of array axis `a`; ITK's MetaImageIO
@@ -80,6 +86,16 @@ fn parse_header(path: &Path, b: &[u8]) -> Result<Header> {
                 data_start: pos,
             });
         }
+    }
+    if pos >= MAX_HEADER {
+        return Err(Error::format(
+            path,
+            "header",
+            format!(
+                "no `ElementDataFile` line within the first {MAX_HEADER} bytes: the text header \
+                 is longer than the {MAX_HEADER}-byte limit (or this is not a MetaImage file)"
+            ),
+        ));
     }
     Err(Error::format(
         path,
@@ -236,6 +252,22 @@ pub fn read(path: &Path) -> Result<Volume<f32>> {
             format!("`{file}`: multi-file data (LIST or a file pattern) is not supported"),
         ));
     } else {
+        // Only a file beside the header: one plain name, no folder part, no `..`.
+        let mut comps = std::path::Path::new(file).components();
+        let beside = matches!(
+            (comps.next(), comps.next()),
+            (Some(std::path::Component::Normal(_)), None)
+        );
+        if !beside {
+            return Err(Error::format(
+                path,
+                kf,
+                format!(
+                    "`{file}`: the data file must be a plain file name in the header's folder \
+                     (no folder part, no `..`, not an absolute path)"
+                ),
+            ));
+        }
         let p = path
             .parent()
             .map(|d| d.join(file))
@@ -368,7 +400,17 @@ pub fn read(path: &Path) -> Result<Volume<f32>> {
             if big_endian { "big" } else { "little" }
         ),
     );
-    steps.push("file affine from Offset and TransformMatrix; recorded, not applied".to_string());
+    let file_affine = if affine.iter().flatten().all(|v| v.is_finite()) {
+        steps
+            .push("file affine from Offset and TransformMatrix; recorded, not applied".to_string());
+        Some(affine)
+    } else {
+        steps.push(format!(
+            "file affine from Offset and TransformMatrix has a NaN or infinite entry \
+             ({affine:?}); dropped (it is informational only: placement never uses it)"
+        ));
+        None
+    };
     Ok(Volume {
         data,
         dims,
@@ -376,7 +418,7 @@ pub fn read(path: &Path) -> Result<Volume<f32>> {
         offset: [0.0; 3],
         provenance: Provenance {
             source: path.display().to_string(),
-            file_affine: Some(affine),
+            file_affine,
             steps,
         },
     })

@@ -17,6 +17,12 @@
 //!
 //! Numeric dtypes: f4, f8, i1/i2/i4/i8, u1/u2/u4/u8, b1, either byte order, C or
 //! Fortran order. Anything else is an error naming the file and the opcode's byte offset.
+//!
+//! Input limits: the value tree may hold at most [`MAX_VALUES`] values and [`MAX_DEPTH`] levels,
+//! counted with every shared reference expanded (so a list shared with itself is refused before
+//! anything is built, not only when it is deep); decoded arrays and copies of shared objects may
+//! take at most [`MEMORY_FACTOR`] x the file size + [`MEMORY_EXTRA`] bytes. An array referenced
+//! twice is valid and yields two equal arrays.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -159,6 +165,12 @@ struct Machine<'a> {
     /// The numpy module path seen (`numpy.core` or `numpy._core`), for the manifest.
     numpy_path: Option<String>,
     protocol: u8,
+    /// Bytes of derived memory still allowed (see [`MEMORY_FACTOR`]).
+    budget: usize,
+    budget_total: usize,
+    /// Values counted so far by [`Machine::count`], and visits per arena object.
+    values: usize,
+    visits: Vec<u32>,
 }
 
 type R<T> = std::result::Result<T, String>;
@@ -327,7 +339,7 @@ impl<'a> Machine<'a> {
 
     /// Decode raw array bytes of `dtype` (descr like "f4", byte order '<', '>', '|', '=').
     fn decode(
-        &self,
+        &mut self,
         descr: &str,
         order: u8,
         shape: &[usize],
@@ -357,6 +369,8 @@ impl<'a> Machine<'a> {
                 n.saturating_mul(size)
             ));
         }
+        // Decoded size in memory: 4 bytes per f4 element, 8 for every other dtype.
+        self.charge(n.saturating_mul(if (kind, size) == ("f", 4) { 4 } else { 8 }))?;
         let big = order == b'>';
         let chunk = |k: usize| -> [u8; 8] {
             let mut w = [0u8; 8];
@@ -456,6 +470,7 @@ impl<'a> Machine<'a> {
                     Obj::Py(Py::Bytes(b)) => b.clone(),
                     _ => return self.err("numpy _frombuffer without an in-band buffer"),
                 };
+                self.charge(raw.len())?;
                 Ok(Obj::Py(Py::Array(
                     self.decode(&descr, order, &shape, fortran, &raw)?,
                 )))
@@ -467,7 +482,10 @@ impl<'a> Machine<'a> {
                 if enc != "latin1" && enc != "latin-1" {
                     return self.err(format!("_codecs.encode with encoding `{enc}`"));
                 }
-                let mut out = Vec::with_capacity(s.len());
+                let n = s.len();
+                let s = s.to_string();
+                self.charge(n)?;
+                let mut out = Vec::with_capacity(n);
                 for c in s.chars() {
                     if (c as u32) > 255 {
                         return self.err("_codecs.encode: character outside latin1");
@@ -478,8 +496,11 @@ impl<'a> Machine<'a> {
             }
             "bytearray" => match a.first() {
                 None => Ok(Obj::Py(Py::Bytes(Vec::new()))),
-                Some(&i) => match self.bytes_of(i) {
-                    Some(b) => Ok(Obj::Py(Py::Bytes(b.to_vec()))),
+                Some(&i) => match self.bytes_of(i).map(|b| b.to_vec()) {
+                    Some(b) => {
+                        self.charge(b.len())?;
+                        Ok(Obj::Py(Py::Bytes(b)))
+                    }
                     None => self.err("bytearray of something that is not bytes"),
                 },
             },
@@ -549,6 +570,7 @@ impl<'a> Machine<'a> {
                             "ndarray data is not a byte string (object arrays are not supported)",
                         ),
                     };
+                self.charge(raw.len())?;
                 let arr = self.decode(&descr, order, &shape, fortran, &raw)?;
                 self.arena[obj] = Obj::Py(Py::Array(arr));
                 Ok(())
@@ -823,30 +845,65 @@ impl<'a> Machine<'a> {
         }
     }
 
-    /// Convert an arena object into a value tree (arrays and bytes are moved out).
-    fn tree(&mut self, i: usize, depth: usize) -> R<Py> {
-        if depth > 64 {
-            return Err("nesting deeper than 64 levels (a cycle?)".into());
+    /// Count how often each arena object is reached from `i` (a shared object once per path),
+    /// failing when the expansion exceeds [`MAX_VALUES`] values or [`MAX_DEPTH`] levels.
+    fn count(&mut self, i: usize, depth: usize) -> R<()> {
+        if depth > MAX_DEPTH {
+            return Err(format!(
+                "nesting deeper than {MAX_DEPTH} levels (a cycle, or not a dataset pickle)"
+            ));
         }
-        let o = std::mem::replace(&mut self.arena[i], Obj::Moved);
-        let out = match o {
+        self.values += 1;
+        if self.values > MAX_VALUES {
+            return Err(format!(
+                "the pickle expands to more than {MAX_VALUES} values (objects shared many \
+                 times over: a pickle bomb, or not a dataset pickle)"
+            ));
+        }
+        self.visits[i] = self.visits[i].saturating_add(1);
+        let children: Vec<usize> = match &self.arena[i] {
+            Obj::List(v) | Obj::Tuple(v) => v.clone(),
+            Obj::Dict(kv) => kv.iter().flat_map(|&(k, v)| [k, v]).collect(),
+            _ => return Ok(()),
+        };
+        for c in children {
+            self.count(c, depth + 1)?;
+        }
+        Ok(())
+    }
+
+    /// Convert an arena object into a value tree. An array, byte or text string reached more
+    /// than once is copied (each copy charged to the memory budget) until its last reference,
+    /// which takes it; call [`Machine::count`] on the root first.
+    fn tree(&mut self, i: usize, depth: usize) -> R<Py> {
+        if depth > MAX_DEPTH {
+            return Err(format!("nesting deeper than {MAX_DEPTH} levels"));
+        }
+        self.visits[i] = self.visits[i].saturating_sub(1);
+        let last = self.visits[i] == 0;
+        let out = match &self.arena[i] {
             Obj::Py(p) => {
-                // Small values stay for later references; arrays and bytes are moved out.
-                if !matches!(p, Py::Array(_) | Py::Bytes(_)) {
-                    self.arena[i] = Obj::Py(p.clone());
+                let big = payload(p);
+                if big > 0 && last {
+                    match std::mem::replace(&mut self.arena[i], Obj::Moved) {
+                        Obj::Py(p) => return Ok(p),
+                        _ => unreachable!("matched Obj::Py above"),
+                    }
                 }
+                let p = p.clone();
+                self.charge(big)?;
                 return Ok(p);
             }
             Obj::List(v) => {
-                self.arena[i] = Obj::List(v.clone());
+                let v = v.clone();
                 Py::List(self.trees(&v, depth)?)
             }
             Obj::Tuple(v) => {
-                self.arena[i] = Obj::Tuple(v.clone());
+                let v = v.clone();
                 Py::Tuple(self.trees(&v, depth)?)
             }
             Obj::Dict(kv) => {
-                self.arena[i] = Obj::Dict(kv.clone());
+                let kv = kv.clone();
                 let mut items = Vec::with_capacity(kv.len());
                 for (k, v) in kv {
                     items.push((self.tree(k, depth + 1)?, self.tree(v, depth + 1)?));
@@ -856,16 +913,64 @@ impl<'a> Machine<'a> {
             Obj::Global(m, n) => return Err(format!("a bare reference to `{m}.{n}`")),
             Obj::Dtype { descr, .. } => return Err(format!("a bare numpy dtype `{descr}`")),
             Obj::ArrayStub => return Err("a numpy array without its data (BUILD missing)".into()),
-            Obj::Moved => {
-                return Err("an array referenced twice or a cyclic structure".into());
-            }
+            Obj::Moved => return Err("an object reached more often than counted".into()),
         };
         Ok(out)
     }
     fn trees(&mut self, v: &[usize], depth: usize) -> R<Vec<Py>> {
         v.iter().map(|&i| self.tree(i, depth + 1)).collect()
     }
+
+    /// Take `n` bytes from the budget of memory derived from the file (decoded arrays, copies).
+    fn charge(&mut self, n: usize) -> R<()> {
+        if n > self.budget {
+            return self.err(format!(
+                "the pickle's objects would take more than {} bytes of memory ({MEMORY_FACTOR} \
+                 x the file size + {} MiB): shared objects copied many times over, or not a \
+                 dataset pickle",
+                self.budget_total,
+                MEMORY_EXTRA >> 20
+            ));
+        }
+        self.budget -= n;
+        Ok(())
+    }
 }
+
+/// Bytes held by a value's payload (0 for small scalars and containers).
+fn payload(p: &Py) -> usize {
+    match p {
+        Py::Str(s) => s.len(),
+        Py::Bytes(b) => b.len(),
+        Py::Array(a) => array_bytes(&a.data),
+        _ => 0,
+    }
+}
+
+/// Bytes held by array data in memory.
+fn array_bytes(d: &ArrayData) -> usize {
+    match d {
+        ArrayData::F32(v) => 4 * v.len(),
+        ArrayData::F64(v) => 8 * v.len(),
+        ArrayData::Int(v) => 8 * v.len(),
+        ArrayData::U64(v) => 8 * v.len(),
+    }
+}
+
+/// Most values (containers, numbers, strings, arrays) a pickle may expand to. A NAF dataset
+/// pickle holds a few dozen; a list shared with itself k times over (`L[k+1] = [L[k], L[k]]`)
+/// expands to 2^k, which is how a 380-byte file can ask for gigabytes.
+pub const MAX_VALUES: usize = 1_000_000;
+
+/// Deepest nesting accepted (NAF pickles are 3 levels deep).
+pub const MAX_DEPTH: usize = 64;
+
+/// Memory budget for what is derived from the file (decoded arrays, copies of shared objects):
+/// `MEMORY_FACTOR` x the file size + `MEMORY_EXTRA` bytes. A u1 array decodes to 8 bytes per
+/// element and an array referenced twice is held twice, so 16x covers honest files.
+pub const MEMORY_FACTOR: usize = 16;
+/// See [`MEMORY_FACTOR`].
+pub const MEMORY_EXTRA: usize = 64 << 20;
 
 fn fortran_to_c(a: NdArray) -> NdArray {
     let shape = a.shape.clone();
@@ -920,8 +1025,19 @@ pub fn parse(bytes: &[u8]) -> std::result::Result<(Py, PickleInfo), String> {
         memo: HashMap::new(),
         numpy_path: None,
         protocol: 0,
+        budget: 0,
+        budget_total: 0,
+        values: 0,
+        visits: Vec::new(),
     };
+    m.budget_total = bytes
+        .len()
+        .saturating_mul(MEMORY_FACTOR)
+        .saturating_add(MEMORY_EXTRA);
+    m.budget = m.budget_total;
     let root = m.run()?;
+    m.visits = vec![0; m.arena.len()];
+    m.count(root, 0)?;
     let v = m.tree(root, 0)?;
     Ok((
         v,
