@@ -24,7 +24,7 @@ pub struct TrainArgs {
     pub data: Option<PathBuf>,
     /// Method: a Gaussian preset (unispine, xgaussian, 3dgs, spwm-only) or a baseline (fdk,
     /// naf, intratomo, nerf, naf-full, intratomo-full, nerf-full).
-    #[arg(long, default_value = "unispine", value_parser = parse_method)]
+    #[arg(long, default_value = "unispine", value_parser = MethodParser)]
     pub method: MethodArg,
     /// Training iterations (paper: 20000).
     #[arg(long)]
@@ -223,6 +223,40 @@ impl MethodArg {
             MethodArg::Gaussians(m) => Some(m),
             MethodArg::Baseline(_) => None,
         }
+    }
+}
+
+/// The `--method` parser: our own error message for an unknown name, and the list of every
+/// preset and baseline as clap's possible values (shown by `--help`, read by the reproduction
+/// harness to validate plans).
+#[derive(Clone, Copy, Debug)]
+struct MethodParser;
+
+impl clap::builder::TypedValueParser for MethodParser {
+    type Value = MethodArg;
+
+    fn parse_ref(
+        &self,
+        cmd: &clap::Command,
+        _arg: Option<&clap::Arg>,
+        value: &std::ffi::OsStr,
+    ) -> Result<MethodArg, clap::Error> {
+        let s = value.to_str().unwrap_or("");
+        parse_method(s).map_err(|e| {
+            clap::Error::raw(clap::error::ErrorKind::InvalidValue, e + "\n").with_cmd(cmd)
+        })
+    }
+
+    fn possible_values(
+        &self,
+    ) -> Option<Box<dyn Iterator<Item = clap::builder::PossibleValue> + '_>> {
+        let presets = <Method as clap::ValueEnum>::value_variants()
+            .iter()
+            .filter_map(clap::ValueEnum::to_possible_value);
+        let baselines = Baseline::names()
+            .into_iter()
+            .map(clap::builder::PossibleValue::new);
+        Some(Box::new(presets.chain(baselines)))
     }
 }
 

@@ -1,9 +1,9 @@
 //! `TrainConfig`: every setting of a training run, as JSON (`config.json` of a run) and as
 //! named method presets that command-line flags override one by one ([`TrainOverrides`]).
 //!
-//! Defaults are the UniSpine-GS values (`config/example.yaml`, research/xgaussian_unispine.md
-//! hyperparameter table); every preset shares them and differs only in the intensity model, the
-//! initialisation and the loss:
+//! Defaults are the UniSpine-GS values (repository orangeisland66/UniSpine-GS, files
+//! `config/example.yaml` and `arguments/__init__.py`); every preset shares them and differs only
+//! in the intensity model, the initialisation and the loss:
 //!
 //! | preset | intensity | init | loss |
 //! |---|---|---|---|
