@@ -378,6 +378,17 @@ pub fn voxel_centre(n: [usize; 3], d: [f64; 3], off: [f64; 3], ijk: [f64; 3]) ->
     p
 }
 
+/// Allowed range of `accuracy` (the trilinear step in voxel sizes). Below 0.01 a ray takes
+/// over 100 samples per voxel (hours for a normal volume); above 1 samples skip voxels and far
+/// above it every ray misses the volume (all-zero projections).
+pub const ACCURACY_RANGE: (f64, f64) = (0.01, 1.0);
+
+/// Most detector pixels per axis (a 16384^2 f32 image is 1 GiB).
+pub const MAX_DETECTOR: usize = 16384;
+
+/// Most voxels per volume axis in a geometry.
+pub const MAX_VOXELS_PER_AXIS: usize = 16384;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -476,14 +487,3 @@ mod tests {
         assert!(e.to_string().contains("missing.json"), "{e}");
     }
 }
-
-/// Allowed range of `accuracy` (the trilinear step in voxel sizes). Below 0.01 a ray takes
-/// over 100 samples per voxel (hours for a normal volume); above 1 samples skip voxels and far
-/// above it every ray misses the volume (all-zero projections).
-pub const ACCURACY_RANGE: (f64, f64) = (0.01, 1.0);
-
-/// Most detector pixels per axis (a 16384^2 f32 image is 1 GiB).
-pub const MAX_DETECTOR: usize = 16384;
-
-/// Most voxels per volume axis in a geometry.
-pub const MAX_VOXELS_PER_AXIS: usize = 16384;

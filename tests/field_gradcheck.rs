@@ -203,8 +203,8 @@ fn field_loss_matches_central_differences() {
             let h = 1e-6;
             let (mut genc, mut gmlp) = (Group::default(), Group::default());
             let mut nonzero = 0;
-            for i in 0..f.params.len() {
-                if i < ne && g[i] == 0.0 && i % 3 != 0 {
+            for (i, &gi) in g.iter().enumerate().take(f.params.len()) {
+                if i < ne && gi == 0.0 && i % 3 != 0 {
                     continue; // untouched hash entries: check every third one only
                 }
                 let mut a = f.clone();
@@ -215,10 +215,10 @@ fn field_loss_matches_central_differences() {
                 let lb = loss_and_grad(&b, &r, &targets, nf, cfg.n_samples, 0.3, &jitter).0;
                 let fd = (la - lb) / (2.0 * h);
                 if i < ne {
-                    genc.add(g[i], fd);
-                    nonzero += (g[i] != 0.0) as usize;
+                    genc.add(gi, fd);
+                    nonzero += (gi != 0.0) as usize;
                 } else {
-                    gmlp.add(g[i], fd);
+                    gmlp.add(gi, fd);
                 }
             }
             let em = gmlp.rel();

@@ -219,7 +219,7 @@ fn npy_claiming_huge_shapes_is_refused_as_volume_and_dataset_array() {
     let dir = tempfile::tempdir().unwrap();
     let mut h =
         "{'descr': '<f4', 'fortran_order': False, 'shape': (4000, 4000, 4000), }".to_string();
-    while (10 + h.len() + 1) % 64 != 0 {
+    while !(10 + h.len() + 1).is_multiple_of(64) {
         h.push(' ');
     }
     h.push('\n');
