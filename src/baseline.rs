@@ -177,6 +177,11 @@ pub struct Outcome {
 }
 
 /// FDK from the training views, re-projected at the test views with the dataset's projector.
+/// The re-projection of a reconstruction at each angle of a split.
+fn project_views(proj: &Projector<'_, f32>, angles: &[f64]) -> Result<Vec<Image2d<f32>>> {
+    angles.iter().map(|&a| proj.view(a)).collect()
+}
+
 pub fn run_fdk(ds: &Dataset) -> Result<(Outcome, Volume<f32>)> {
     crate::dataset::store::check(ds)?;
     let t0 = Instant::now();
@@ -185,20 +190,10 @@ pub fn run_fdk(ds: &Dataset) -> Result<(Outcome, Volume<f32>)> {
     let method = dataset_projector(ds);
     let proj = Projector::new(&vol, &ds.geometry, method)?;
     let te = Instant::now();
-    let test_renders: Vec<Image2d<f32>> = ds
-        .test
-        .angles
-        .iter()
-        .map(|&a| proj.view(a))
-        .collect::<Result<_>>()?;
+    let test_renders = project_views(&proj, &ds.test.angles)?;
     let ev = score_line_integrals(&test_renders, &ds.test.projections)?;
     let eval_time = te.elapsed().as_secs_f64();
-    let train_renders: Vec<Image2d<f32>> = ds
-        .train
-        .angles
-        .iter()
-        .map(|&a| proj.view(a))
-        .collect::<Result<_>>()?;
+    let train_renders = project_views(&proj, &ds.train.angles)?;
     let train_fit = score_line_integrals(&train_renders, &ds.train.projections)?;
     let (fps, _) = views_fps(ds.test.angles.len(), &|k| {
         std::hint::black_box(proj.view(ds.test.angles[k])?);
