@@ -1,5 +1,12 @@
 //! `TrainConfig`: every setting of a training run, as JSON (`config.json` of a run) and as
-//! named method presets that command-line flags override one by one ([`TrainOverrides`]).
+//! named method presets that command-line flags override one by one
+//! ([`super::TrainOverrides`]).
+//!
+//! **Adding a setting** (each is declared once): a field here or in the stage config it belongs
+//! to (`#[serde(default)]` so that old `config.json` files still load with the old behaviour),
+//! its value in [`TrainConfig::preset`], and one row in the table of [`super::settings`], which
+//! declares its allowed range and, if it has one, its `unispine train` flag and help; the flag
+//! struct, the code that applies the flags and the validation are generated from that row.
 //!
 //! Defaults are the UniSpine-GS values (repository orangeisland66/UniSpine-GS, files
 //! `config/example.yaml` and `arguments/__init__.py`); every preset shares them and differs only
@@ -180,40 +187,6 @@ fn one() -> f64 {
     1.0
 }
 
-/// Upper bound on `iterations` (50 x the paper's schedule).
-pub const MAX_ITERATIONS: usize = 1_000_000;
-
-/// Error unless `v` is finite (or an infinite bound allows it) and inside the interval
-/// `lo..hi` (each end open or closed); the message names the field and the interval.
-fn check_range(field: &str, v: f64, lo: (f64, bool), hi: (f64, bool)) -> Result<()> {
-    let above = if lo.1 { v > lo.0 } else { v >= lo.0 };
-    let below = if hi.1 { v < hi.0 } else { v <= hi.0 };
-    if v.is_finite() && above && below {
-        return Ok(());
-    }
-    let end = |x: f64| {
-        if x.is_infinite() {
-            if x > 0.0 {
-                "inf".to_string()
-            } else {
-                "-inf".to_string()
-            }
-        } else {
-            format!("{x}")
-        }
-    };
-    Err(Error::invalid(
-        field,
-        format!(
-            "must be a finite number in {}{}, {}{}, got {v}",
-            if lo.1 { "(" } else { "[" },
-            end(lo.0),
-            end(hi.0),
-            if hi.1 { ")" } else { "]" }
-        ),
-    ))
-}
-
 impl TrainConfig {
     /// The preset of `method` with the paper schedule.
     pub fn preset(method: Method) -> Self {
@@ -269,7 +242,7 @@ impl TrainConfig {
     /// Scale every iteration-based schedule (position lr, densification, opacity reset, feature
     /// steps, SPWM warm-up, evaluation points) from the paper's 20000 iterations to
     /// `self.iterations`, for short runs that still go through every phase. Scales the paper
-    /// schedule: [`TrainOverrides::apply`] refuses a config already compressed
+    /// schedule: [`super::TrainOverrides::apply`] refuses a config already compressed
     /// (`schedule_compressed`).
     pub fn compress_schedule(&mut self) {
         self.schedule_compressed = true;
@@ -320,191 +293,9 @@ impl TrainConfig {
     }
 
     /// Check values a run cannot work with, before iteration 1; the error names the field and
-    /// gives its allowed range.
+    /// gives its allowed range (the ranges are declared with the flags in [`super::settings`]).
     pub fn validate(&self) -> Result<()> {
-        let inf = f64::INFINITY;
-        // (field, value, low, low open, high, high open)
-        let mut checks: Vec<(&str, f64, f64, bool, f64, bool)> = vec![
-            (
-                "iterations",
-                self.iterations as f64,
-                1.0,
-                false,
-                MAX_ITERATIONS as f64,
-                false,
-            ),
-            (
-                "init.interval",
-                self.init.interval as f64,
-                1.0,
-                false,
-                inf,
-                true,
-            ),
-            ("init.opacity", self.init.opacity, 0.0, true, 1.0, true),
-            ("init.intensity", self.init.intensity, -inf, true, inf, true),
-            // Learning rates: a step of the full scene extent per iteration is the most that
-            // can make sense (upstream 1.6e-4 to 1.9e-4).
-            (
-                "lr.position_init",
-                self.lr.position_init,
-                0.0,
-                true,
-                1.0,
-                false,
-            ),
-            (
-                "lr.position_final",
-                self.lr.position_final,
-                0.0,
-                true,
-                1.0,
-                false,
-            ),
-            (
-                "lr.position_delay_mult",
-                self.lr.position_delay_mult,
-                0.0,
-                true,
-                1.0,
-                false,
-            ),
-            ("lr.feature", self.lr.feature, 0.0, true, 1.0, false),
-            (
-                "lr.feature_rest_div",
-                self.lr.feature_rest_div,
-                0.0,
-                true,
-                1e6,
-                false,
-            ),
-            ("lr.opacity", self.lr.opacity, 0.0, true, 1.0, false),
-            ("lr.scaling", self.lr.scaling, 0.0, true, 1.0, false),
-            ("lr.rotation", self.lr.rotation, 0.0, true, 1.0, false),
-            // beta = 1 never updates the moments and divides by 1 - beta^t = 0; eps = 0 divides
-            // by zero where a gradient is zero.
-            ("adam.beta1", self.adam.beta1, 0.0, false, 1.0, true),
-            ("adam.beta2", self.adam.beta2, 0.0, false, 1.0, true),
-            ("adam.eps", self.adam.eps, 0.0, true, 1.0, false),
-            (
-                "densify.grad_threshold",
-                self.densify.grad_threshold,
-                0.0,
-                false,
-                inf,
-                true,
-            ),
-            (
-                "densify.percent_dense",
-                self.densify.percent_dense,
-                0.0,
-                false,
-                1.0,
-                false,
-            ),
-            (
-                "densify.min_opacity",
-                self.densify.min_opacity,
-                0.0,
-                false,
-                1.0,
-                true,
-            ),
-            (
-                "densify.max_screen_px",
-                self.densify.max_screen_px,
-                0.0,
-                true,
-                inf,
-                true,
-            ),
-            (
-                "densify.max_world_frac",
-                self.densify.max_world_frac,
-                0.0,
-                true,
-                inf,
-                true,
-            ),
-            (
-                "densify.reset_opacity_to",
-                self.densify.reset_opacity_to,
-                0.0,
-                true,
-                1.0,
-                true,
-            ),
-            (
-                "densify.split_scale_div",
-                self.densify.split_scale_div,
-                1.0,
-                false,
-                inf,
-                true,
-            ),
-            (
-                "loss.lambda_dssim",
-                self.loss.lambda_dssim,
-                0.0,
-                false,
-                1.0,
-                false,
-            ),
-            (
-                "loss.charbonnier_eps",
-                self.loss.charbonnier_eps,
-                0.0,
-                true,
-                1.0,
-                false,
-            ),
-            ("loss.delta", self.loss.delta, 0.0, true, 1.0, false),
-            (
-                "spwm_time_scale",
-                self.spwm_time_scale,
-                0.0,
-                true,
-                1e9,
-                false,
-            ),
-            ("background", self.background, -inf, true, inf, true),
-        ];
-        if let Some(m) = self.densify.max_gaussians {
-            checks.push(("densify.max_gaussians", m as f64, 1.0, false, inf, true));
-        }
-        if let Some(v) = self.train_views {
-            checks.push(("train_views", v as f64, 1.0, false, inf, true));
-        }
-        if let Some(w) = &self.spwm {
-            checks.extend([
-                ("spwm.alpha", w.alpha, 0.0, false, 1.0, false),
-                ("spwm.hf_lambda", w.hf_lambda, 0.0, false, inf, true),
-                ("spwm.blur_sigma", w.blur_sigma, 0.0, true, 1e3, false),
-                (
-                    "spwm.blur_kernel",
-                    w.blur_kernel as f64,
-                    1.0,
-                    false,
-                    1001.0,
-                    false,
-                ),
-                ("spwm.quantile", w.quantile, 0.0, false, 1.0, false),
-                ("spwm.tau_max", w.tau_max, 0.0, false, 1.0, false),
-                ("spwm.fixed_tau", w.fixed_tau, 0.0, false, 1.0, false),
-                (
-                    "spwm.gate_temperature",
-                    w.gate_temperature,
-                    0.0,
-                    true,
-                    inf,
-                    true,
-                ),
-            ]);
-        }
-        for (field, v, lo, lo_open, hi, hi_open) in checks {
-            check_range(field, v, (lo, lo_open), (hi, hi_open))?;
-        }
-        Ok(())
+        super::settings::check_ranges(self)
     }
 
     /// Read a config JSON.
@@ -516,151 +307,6 @@ impl TrainConfig {
     /// Write as pretty JSON (atomically).
     pub fn save(&self, path: &Path) -> Result<()> {
         crate::fsio::write_json_atomic(path, self)
-    }
-}
-
-fn parse_color(s: &str) -> std::result::Result<ColorMode, String> {
-    serde_json::from_value(serde_json::Value::String(s.to_string()))
-        .map_err(|_| format!("unknown colour mode `{s}` (rirf-paper, rirf-xgaussian, sh)"))
-}
-
-fn parse_data_term(s: &str) -> std::result::Result<DataTerm, String> {
-    serde_json::from_value(serde_json::Value::String(s.to_string()))
-        .map_err(|_| format!("unknown data term `{s}` (l1, charbonnier, weighted-charbonnier)"))
-}
-
-/// Command-line overrides of a preset (each flag replaces one field).
-#[derive(Clone, Debug, Default, clap::Args)]
-pub struct TrainOverrides {
-    /// Start from this config JSON (e.g. a run's `config.json`) instead of the preset.
-    #[arg(long)]
-    pub config: Option<std::path::PathBuf>,
-    /// Seed of the view order, random init and split samples.
-    #[arg(long)]
-    pub seed: Option<u64>,
-    /// Intensity model: rirf-paper, rirf-xgaussian or sh.
-    #[arg(long, value_parser = parse_color)]
-    pub color: Option<ColorMode>,
-    /// Initialisation: acui or random.
-    #[arg(long, value_enum)]
-    pub init: Option<InitKind>,
-    /// ACUI grid step in voxels.
-    #[arg(long)]
-    pub acui_interval: Option<usize>,
-    /// Initial intensity of every Gaussian (upstream's uint8 round trip gives 127/255).
-    #[arg(long)]
-    pub init_intensity: Option<f64>,
-    /// Data term: l1, charbonnier or weighted-charbonnier.
-    #[arg(long, value_parser = parse_data_term)]
-    pub data_term: Option<DataTerm>,
-    /// Weight of D-SSIM in Eq. (8).
-    #[arg(long)]
-    pub lambda_dssim: Option<f64>,
-    /// SPWM weights on (true) or off (false).
-    #[arg(long)]
-    pub spwm: Option<bool>,
-    /// Upper bound on the number of Gaussians (off by default).
-    #[arg(long)]
-    pub max_gaussians: Option<usize>,
-    /// Densification threshold on the mean NDC gradient norm.
-    #[arg(long)]
-    pub grad_threshold: Option<f64>,
-    /// Densify after this iteration.
-    #[arg(long)]
-    pub densify_from: Option<usize>,
-    /// Densify before this iteration.
-    #[arg(long)]
-    pub densify_until: Option<usize>,
-    /// Densify every this many iterations.
-    #[arg(long)]
-    pub densify_interval: Option<usize>,
-    /// Reproduce upstream's radius reset before the screen-size prune (true/false).
-    #[arg(long)]
-    pub upstream_radii_reset: Option<bool>,
-    /// Position learning rate at the start (times the extent).
-    #[arg(long)]
-    pub position_lr_init: Option<f64>,
-    /// Position learning rate at the end (times the extent).
-    #[arg(long)]
-    pub position_lr_final: Option<f64>,
-    /// Evaluate on the test views at these iterations (comma-separated).
-    #[arg(long, value_delimiter = ',')]
-    pub eval_iterations: Option<Vec<usize>>,
-    /// Use only the first N training views (upstream 50).
-    #[arg(long)]
-    pub train_views: Option<usize>,
-    /// Checkpoint every N iterations (0: only at the end).
-    #[arg(long)]
-    pub checkpoint_every: Option<usize>,
-    /// Number of test views saved as PNG beside the ground truth.
-    #[arg(long)]
-    pub preview_views: Option<usize>,
-    /// Scale every schedule (lr, densification, resets, feature steps, SPWM warm-up, eval
-    /// points) from 20000 iterations to --iters.
-    #[arg(long)]
-    pub compress_schedule: bool,
-}
-
-impl TrainOverrides {
-    /// The config for `method` and `iterations` with these overrides applied.
-    pub fn apply(&self, method: Method, iterations: Option<usize>) -> Result<TrainConfig> {
-        let mut c = match &self.config {
-            Some(p) => TrainConfig::load(p)?,
-            None => TrainConfig::preset(method),
-        };
-        if let Some(n) = iterations {
-            c.iterations = n;
-        }
-        if self.compress_schedule {
-            if c.schedule_compressed {
-                return Err(Error::invalid(
-                    "--compress-schedule",
-                    "the config's schedule is already compressed (it comes from a run made with \
-                     --compress-schedule); compressing it again would shrink every phase twice: \
-                     drop --compress-schedule, or start from the preset",
-                ));
-            }
-            c.compress_schedule();
-        }
-        macro_rules! set {
-            ($field:expr, $v:expr) => {
-                if let Some(v) = $v.clone() {
-                    $field = v;
-                }
-            };
-        }
-        set!(c.seed, self.seed);
-        set!(c.color, self.color);
-        set!(c.init.kind, self.init);
-        set!(c.init.interval, self.acui_interval);
-        set!(c.init.intensity, self.init_intensity);
-        set!(c.loss.data_term, self.data_term);
-        set!(c.loss.lambda_dssim, self.lambda_dssim);
-        if let Some(on) = self.spwm {
-            c.spwm = if on {
-                Some(c.spwm.clone().unwrap_or_default())
-            } else {
-                None
-            };
-        }
-        if self.max_gaussians.is_some() {
-            c.densify.max_gaussians = self.max_gaussians;
-        }
-        set!(c.densify.grad_threshold, self.grad_threshold);
-        set!(c.densify.from_iter, self.densify_from);
-        set!(c.densify.until_iter, self.densify_until);
-        set!(c.densify.interval, self.densify_interval);
-        set!(c.densify.upstream_radii_reset, self.upstream_radii_reset);
-        set!(c.lr.position_init, self.position_lr_init);
-        set!(c.lr.position_final, self.position_lr_final);
-        set!(c.eval_iterations, self.eval_iterations);
-        if self.train_views.is_some() {
-            c.train_views = self.train_views;
-        }
-        set!(c.checkpoint_every, self.checkpoint_every);
-        set!(c.preview_views, self.preview_views);
-        c.validate()?;
-        Ok(c)
     }
 }
 
@@ -711,28 +357,6 @@ mod tests {
             let e = c.validate().unwrap_err().to_string();
             assert!(e.contains(field) && e.contains(range), "{e}");
         }
-    }
-
-    #[test]
-    fn a_compressed_config_is_not_compressed_twice() {
-        let dir = tempfile::tempdir().unwrap();
-        let mut c = TrainConfig::preset(Method::Unispine);
-        c.iterations = 2000;
-        c.compress_schedule();
-        let p = dir.path().join("config.json");
-        c.save(&p).unwrap();
-        let o = TrainOverrides {
-            config: Some(p.clone()),
-            ..Default::default()
-        };
-        assert_eq!(o.apply(Method::Unispine, None).unwrap(), c);
-        let o = TrainOverrides {
-            config: Some(p),
-            compress_schedule: true,
-            ..Default::default()
-        };
-        let e = o.apply(Method::Unispine, None).unwrap_err().to_string();
-        assert!(e.contains("already compressed"), "{e}");
     }
 
     #[test]

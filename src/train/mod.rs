@@ -1,4 +1,4 @@
-//! The trainer: method presets ([`config`]), the training loop ([`Trainer`], [`run`]) and its
+//! The trainer: method presets ([`config`]) and their settings ([`settings`]), the training loop ([`Trainer`], [`run`]) and its
 //! progress events ([`event`]).
 //!
 //! One iteration (1-based `it`), in the order of UniSpine-GS / X-Gaussian `train.py`:
@@ -34,6 +34,7 @@ pub mod config;
 pub mod event;
 pub mod run_dir;
 pub mod session;
+pub mod settings;
 
 use std::time::Instant;
 
@@ -50,10 +51,11 @@ use crate::loss::{self, spwm};
 use crate::optim::{Group, N_GROUPS};
 use crate::render::{self, RenderSettings};
 
-pub use config::{Method, TrainConfig, TrainOverrides};
+pub use config::{Method, TrainConfig};
 pub use event::Event;
 pub use run_dir::{Checkpoint, EvalPoint, Metrics, RunDir};
 pub use session::{resume, run, run_with, Control};
+pub use settings::TrainOverrides;
 
 /// Scene extent: 1.1 x max distance of the camera centres from their mean (3DGS
 /// `getNerfppNorm`, used as `spatial_lr_scale` and in the densification thresholds).

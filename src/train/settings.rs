@@ -1,0 +1,520 @@
+//! The settings of `unispine train`, each declared once in the [`settings!`] table below: the
+//! `config.json` field it lives in, its allowed range (checked by [`TrainConfig::validate`] on
+//! every config: preset, `--config FILE` and flags alike) and the command-line flag that
+//! overrides it, with its help. The table generates [`TrainOverrides`] (the clap flags),
+//! [`TrainOverrides::apply`] and the range checks, so the flags, the saved config and the
+//! validation cannot drift apart.
+//!
+//! A row reads
+//!
+//! ```text
+//! "loss.lambda_dssim"                                  // field, as validation errors name it
+//!     range(|c| c.loss.lambda_dssim, ge_le(0.0, 1.0))  // allowed range of the value
+//!     flag(
+//!         /// Weight of D-SSIM in Eq. (8).             // --help text
+//!         lambda_dssim: f64                            // flag --lambda-dssim and its type
+//!         => |c, v| c.loss.lambda_dssim = v            // how the flag sets the config
+//!     );
+//! ```
+//!
+//! `range(get, r)` checks a number (integers as `f64`), `range_if(get, r)` one that may be
+//! absent (`get` returns an `Option<f64>`: off, or a disabled section); `r` is one of
+//! [`ge_le`], [`ge_lt`], [`gt_le`], [`gt_lt`] (`ge` = closed, `gt` = open end, bounds may be
+//! infinite). Either part may be left out: a setting without a flag is still validated, a flag
+//! without a range takes any value its type can hold. Extra `#[arg(...)]` attributes go beside
+//! the help (a value parser, a delimiter).
+//!
+//! Adding a setting: give it a field (with a `#[serde(default)]` that keeps old `config.json`
+//! files loading with the old behaviour) in [`TrainConfig`] or the stage config it belongs to,
+//! its value in [`TrainConfig::preset`], and one row here. Preset semantics: the preset (or
+//! `--config FILE`) gives every value, `--iters` and `--compress-schedule` act next, then each
+//! flag given replaces its one field, then the whole config is validated.
+
+use std::path::PathBuf;
+
+use super::config::{Method, TrainConfig};
+use crate::error::{Error, Result};
+use crate::gaussians::init::InitKind;
+use crate::loss::DataTerm;
+use crate::render::ColorMode;
+
+/// Upper bound on `iterations` (50 x the paper's schedule).
+pub const MAX_ITERATIONS: usize = 1_000_000;
+
+/// An allowed interval `lo..hi`, each end closed or open.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Interval {
+    pub lo: f64,
+    pub lo_open: bool,
+    pub hi: f64,
+    pub hi_open: bool,
+}
+
+/// `[lo, hi]`.
+pub const fn ge_le(lo: f64, hi: f64) -> Interval {
+    Interval {
+        lo,
+        lo_open: false,
+        hi,
+        hi_open: false,
+    }
+}
+
+/// `[lo, hi)`.
+pub const fn ge_lt(lo: f64, hi: f64) -> Interval {
+    Interval {
+        lo,
+        lo_open: false,
+        hi,
+        hi_open: true,
+    }
+}
+
+/// `(lo, hi]`.
+pub const fn gt_le(lo: f64, hi: f64) -> Interval {
+    Interval {
+        lo,
+        lo_open: true,
+        hi,
+        hi_open: false,
+    }
+}
+
+/// `(lo, hi)`.
+pub const fn gt_lt(lo: f64, hi: f64) -> Interval {
+    Interval {
+        lo,
+        lo_open: true,
+        hi,
+        hi_open: true,
+    }
+}
+
+const INF: f64 = f64::INFINITY;
+
+/// Error unless `v` is finite and inside `r`; the message names the field and the interval.
+fn check_range(field: &str, v: f64, r: Interval) -> Result<()> {
+    let above = if r.lo_open { v > r.lo } else { v >= r.lo };
+    let below = if r.hi_open { v < r.hi } else { v <= r.hi };
+    if v.is_finite() && above && below {
+        return Ok(());
+    }
+    let end = |x: f64| {
+        if x.is_infinite() {
+            if x > 0.0 {
+                "inf".to_string()
+            } else {
+                "-inf".to_string()
+            }
+        } else {
+            format!("{x}")
+        }
+    };
+    Err(Error::invalid(
+        field,
+        format!(
+            "must be a finite number in {}{}, {}{}, got {v}",
+            if r.lo_open { "(" } else { "[" },
+            end(r.lo),
+            end(r.hi),
+            if r.hi_open { ")" } else { "]" }
+        ),
+    ))
+}
+
+fn parse_color(s: &str) -> std::result::Result<ColorMode, String> {
+    serde_json::from_value(serde_json::Value::String(s.to_string()))
+        .map_err(|_| format!("unknown colour mode `{s}` (rirf-paper, rirf-xgaussian, sh)"))
+}
+
+fn parse_data_term(s: &str) -> std::result::Result<DataTerm, String> {
+    serde_json::from_value(serde_json::Value::String(s.to_string()))
+        .map_err(|_| format!("unknown data term `{s}` (l1, charbonnier, weighted-charbonnier)"))
+}
+
+/// Generates [`TrainOverrides`], [`TrainOverrides::apply`]'s flag part and [`check_ranges`]
+/// from one table; see the module documentation for the row syntax.
+macro_rules! settings {
+    ($(
+        $field:literal
+        $(range($get:expr, $range:expr))?
+        $(range_if($get_opt:expr, $range_opt:expr))?
+        $(flag($(#[$attr:meta])* $name:ident : $ty:ty => |$c:ident, $v:ident| $set:expr))?
+        ;
+    )*) => {
+        /// Command-line overrides of a preset (each flag replaces one field; see
+        /// [`crate::train::settings`]).
+        #[derive(Clone, Debug, Default, clap::Args)]
+        pub struct TrainOverrides {
+            /// Start from this config JSON (e.g. a run's `config.json`) instead of the preset.
+            #[arg(long)]
+            pub config: Option<PathBuf>,
+            $($(
+                $(#[$attr])*
+                #[arg(long)]
+                pub $name: Option<$ty>,
+            )?)*
+            /// Scale every schedule (lr, densification, resets, feature steps, SPWM warm-up, eval
+            /// points) from 20000 iterations to --iters.
+            #[arg(long)]
+            pub compress_schedule: bool,
+        }
+
+        impl TrainOverrides {
+            /// Replace the field of every flag given.
+            fn set_flags(&self, cfg: &mut TrainConfig) {
+                $($(
+                    if let Some($v) = self.$name.clone() {
+                        let $c = &mut *cfg;
+                        $set;
+                    }
+                )?)*
+            }
+        }
+
+        /// Check every declared range (in table order); the error names the field and its
+        /// allowed range.
+        pub(crate) fn check_ranges(c: &TrainConfig) -> Result<()> {
+            $(
+                $({
+                    let get: fn(&TrainConfig) -> f64 = $get;
+                    check_range($field, get(c), $range)?;
+                })?
+                $({
+                    let get: fn(&TrainConfig) -> Option<f64> = $get_opt;
+                    if let Some(v) = get(c) {
+                        check_range($field, v, $range_opt)?;
+                    }
+                })?
+            )*
+            Ok(())
+        }
+
+        /// The `config.json` field of every row of the table.
+        pub fn declared_fields() -> Vec<&'static str> {
+            vec![$($field),*]
+        }
+    };
+}
+
+settings! {
+    "iterations" range(|c| c.iterations as f64, ge_le(1.0, MAX_ITERATIONS as f64));
+    "seed" flag(
+        /// Seed of the view order, random init and split samples.
+        seed: u64 => |c, v| c.seed = v
+    );
+    "color" flag(
+        /// Intensity model: rirf-paper, rirf-xgaussian or sh.
+        #[arg(value_parser = parse_color)]
+        color: ColorMode => |c, v| c.color = v
+    );
+    "init.kind" flag(
+        /// Initialisation: acui or random.
+        #[arg(value_enum)]
+        init: InitKind => |c, v| c.init.kind = v
+    );
+    "init.interval" range(|c| c.init.interval as f64, ge_lt(1.0, INF)) flag(
+        /// ACUI grid step in voxels.
+        acui_interval: usize => |c, v| c.init.interval = v
+    );
+    "init.opacity" range(|c| c.init.opacity, gt_lt(0.0, 1.0));
+    "init.intensity" range(|c| c.init.intensity, gt_lt(-INF, INF)) flag(
+        /// Initial intensity of every Gaussian (upstream's uint8 round trip gives 127/255).
+        init_intensity: f64 => |c, v| c.init.intensity = v
+    );
+    "loss.data_term" flag(
+        /// Data term: l1, charbonnier or weighted-charbonnier.
+        #[arg(value_parser = parse_data_term)]
+        data_term: DataTerm => |c, v| c.loss.data_term = v
+    );
+    "loss.lambda_dssim" range(|c| c.loss.lambda_dssim, ge_le(0.0, 1.0)) flag(
+        /// Weight of D-SSIM in Eq. (8).
+        lambda_dssim: f64 => |c, v| c.loss.lambda_dssim = v
+    );
+    "loss.charbonnier_eps" range(|c| c.loss.charbonnier_eps, gt_le(0.0, 1.0));
+    "loss.delta" range(|c| c.loss.delta, gt_le(0.0, 1.0));
+    "spwm" flag(
+        /// SPWM weights on (true) or off (false).
+        spwm: bool => |c, on| c.spwm = if on { Some(c.spwm.clone().unwrap_or_default()) } else { None }
+    );
+    "spwm.alpha" range_if(|c| c.spwm.as_ref().map(|w| w.alpha), ge_le(0.0, 1.0));
+    "spwm.hf_lambda" range_if(|c| c.spwm.as_ref().map(|w| w.hf_lambda), ge_lt(0.0, INF));
+    "spwm.blur_sigma" range_if(|c| c.spwm.as_ref().map(|w| w.blur_sigma), gt_le(0.0, 1e3));
+    "spwm.blur_kernel"
+        range_if(|c| c.spwm.as_ref().map(|w| w.blur_kernel as f64), ge_le(1.0, 1001.0));
+    "spwm.quantile" range_if(|c| c.spwm.as_ref().map(|w| w.quantile), ge_le(0.0, 1.0));
+    "spwm.tau_max" range_if(|c| c.spwm.as_ref().map(|w| w.tau_max), ge_le(0.0, 1.0));
+    "spwm.fixed_tau" range_if(|c| c.spwm.as_ref().map(|w| w.fixed_tau), ge_le(0.0, 1.0));
+    "spwm.gate_temperature"
+        range_if(|c| c.spwm.as_ref().map(|w| w.gate_temperature), gt_lt(0.0, INF));
+    "spwm_time_scale" range(|c| c.spwm_time_scale, gt_le(0.0, 1e9));
+    "densify.max_gaussians"
+        range_if(|c| c.densify.max_gaussians.map(|m| m as f64), ge_lt(1.0, INF))
+        flag(
+            /// Upper bound on the number of Gaussians (off by default).
+            max_gaussians: usize => |c, v| c.densify.max_gaussians = Some(v)
+        );
+    "densify.grad_threshold" range(|c| c.densify.grad_threshold, ge_lt(0.0, INF)) flag(
+        /// Densification threshold on the mean NDC gradient norm.
+        grad_threshold: f64 => |c, v| c.densify.grad_threshold = v
+    );
+    "densify.from_iter" flag(
+        /// Densify after this iteration.
+        densify_from: usize => |c, v| c.densify.from_iter = v
+    );
+    "densify.until_iter" flag(
+        /// Densify before this iteration.
+        densify_until: usize => |c, v| c.densify.until_iter = v
+    );
+    "densify.interval" flag(
+        /// Densify every this many iterations.
+        densify_interval: usize => |c, v| c.densify.interval = v
+    );
+    "densify.upstream_radii_reset" flag(
+        /// Reproduce upstream's radius reset before the screen-size prune (true/false).
+        upstream_radii_reset: bool => |c, v| c.densify.upstream_radii_reset = v
+    );
+    "densify.percent_dense" range(|c| c.densify.percent_dense, ge_le(0.0, 1.0));
+    "densify.min_opacity" range(|c| c.densify.min_opacity, ge_lt(0.0, 1.0));
+    "densify.max_screen_px" range(|c| c.densify.max_screen_px, gt_lt(0.0, INF));
+    "densify.max_world_frac" range(|c| c.densify.max_world_frac, gt_lt(0.0, INF));
+    "densify.reset_opacity_to" range(|c| c.densify.reset_opacity_to, gt_lt(0.0, 1.0));
+    "densify.split_scale_div" range(|c| c.densify.split_scale_div, ge_lt(1.0, INF));
+    // Learning rates: a step of the full scene extent per iteration is the most that can make
+    // sense (upstream 1.6e-4 to 1.9e-4).
+    "lr.position_init" range(|c| c.lr.position_init, gt_le(0.0, 1.0)) flag(
+        /// Position learning rate at the start (times the extent).
+        position_lr_init: f64 => |c, v| c.lr.position_init = v
+    );
+    "lr.position_final" range(|c| c.lr.position_final, gt_le(0.0, 1.0)) flag(
+        /// Position learning rate at the end (times the extent).
+        position_lr_final: f64 => |c, v| c.lr.position_final = v
+    );
+    "lr.position_delay_mult" range(|c| c.lr.position_delay_mult, gt_le(0.0, 1.0));
+    "lr.feature" range(|c| c.lr.feature, gt_le(0.0, 1.0));
+    "lr.feature_rest_div" range(|c| c.lr.feature_rest_div, gt_le(0.0, 1e6));
+    "lr.opacity" range(|c| c.lr.opacity, gt_le(0.0, 1.0));
+    "lr.scaling" range(|c| c.lr.scaling, gt_le(0.0, 1.0));
+    "lr.rotation" range(|c| c.lr.rotation, gt_le(0.0, 1.0));
+    // beta = 1 never updates the moments and divides by 1 - beta^t = 0; eps = 0 divides by
+    // zero where a gradient is zero.
+    "adam.beta1" range(|c| c.adam.beta1, ge_lt(0.0, 1.0));
+    "adam.beta2" range(|c| c.adam.beta2, ge_lt(0.0, 1.0));
+    "adam.eps" range(|c| c.adam.eps, gt_le(0.0, 1.0));
+    "background" range(|c| c.background, gt_lt(-INF, INF));
+    "eval_iterations" flag(
+        /// Evaluate on the test views at these iterations (comma-separated).
+        #[arg(value_delimiter = ',')]
+        eval_iterations: Vec<usize> => |c, v| c.eval_iterations = v
+    );
+    "train_views" range_if(|c| c.train_views.map(|v| v as f64), ge_lt(1.0, INF)) flag(
+        /// Use only the first N training views (upstream 50).
+        train_views: usize => |c, v| c.train_views = Some(v)
+    );
+    "checkpoint_every" flag(
+        /// Checkpoint every N iterations (0: only at the end).
+        checkpoint_every: usize => |c, v| c.checkpoint_every = v
+    );
+    "preview_views" flag(
+        /// Number of test views saved as PNG beside the ground truth.
+        preview_views: usize => |c, v| c.preview_views = v
+    );
+}
+
+impl TrainOverrides {
+    /// The config for `method` and `iterations` with these overrides applied, validated.
+    pub fn apply(&self, method: Method, iterations: Option<usize>) -> Result<TrainConfig> {
+        let mut c = match &self.config {
+            Some(p) => TrainConfig::load(p)?,
+            None => TrainConfig::preset(method),
+        };
+        if let Some(n) = iterations {
+            c.iterations = n;
+        }
+        if self.compress_schedule {
+            if c.schedule_compressed {
+                return Err(Error::invalid(
+                    "--compress-schedule",
+                    "the config's schedule is already compressed (it comes from a run made with \
+                     --compress-schedule); compressing it again would shrink every phase twice: \
+                     drop --compress-schedule, or start from the preset",
+                ));
+            }
+            c.compress_schedule();
+        }
+        self.set_flags(&mut c);
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// The `unispine train` flags these overrides parse (`--config`, one per setting,
+    /// `--compress-schedule`), as a clap command of their own.
+    pub fn command() -> clap::Command {
+        <TrainOverrides as clap::Args>::augment_args(clap::Command::new("train"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_field_is_declared_once() {
+        let d = declared_fields();
+        let mut fields = d.clone();
+        fields.sort_unstable();
+        let n = fields.len();
+        fields.dedup();
+        assert_eq!(fields.len(), n, "a field declared twice");
+        // Every declared field is a real config.json path.
+        let v = serde_json::to_value(TrainConfig::preset(Method::Unispine)).unwrap();
+        for field in &d {
+            let mut at = &v;
+            for part in field.split('.') {
+                at = at
+                    .get(part)
+                    .unwrap_or_else(|| panic!("{field} is not a config.json field"));
+            }
+        }
+    }
+
+    #[test]
+    fn the_flags_keep_their_names() {
+        let cmd = TrainOverrides::command();
+        let longs: Vec<&str> = cmd.get_arguments().filter_map(|a| a.get_long()).collect();
+        assert_eq!(
+            longs,
+            [
+                "config",
+                "seed",
+                "color",
+                "init",
+                "acui-interval",
+                "init-intensity",
+                "data-term",
+                "lambda-dssim",
+                "spwm",
+                "max-gaussians",
+                "grad-threshold",
+                "densify-from",
+                "densify-until",
+                "densify-interval",
+                "upstream-radii-reset",
+                "position-lr-init",
+                "position-lr-final",
+                "eval-iterations",
+                "train-views",
+                "checkpoint-every",
+                "preview-views",
+                "compress-schedule",
+            ]
+        );
+    }
+
+    #[test]
+    fn each_flag_sets_its_field() {
+        use clap::FromArgMatches;
+        let argv = [
+            "train",
+            "--seed",
+            "7",
+            "--color",
+            "sh",
+            "--init",
+            "random",
+            "--acui-interval",
+            "3",
+            "--init-intensity",
+            "0.25",
+            "--data-term",
+            "l1",
+            "--lambda-dssim",
+            "0.5",
+            "--spwm",
+            "false",
+            "--max-gaussians",
+            "99",
+            "--grad-threshold",
+            "0.001",
+            "--densify-from",
+            "11",
+            "--densify-until",
+            "12",
+            "--densify-interval",
+            "13",
+            "--upstream-radii-reset",
+            "true",
+            "--position-lr-init",
+            "0.5",
+            "--position-lr-final",
+            "0.25",
+            "--eval-iterations",
+            "4,5",
+            "--train-views",
+            "6",
+            "--checkpoint-every",
+            "8",
+            "--preview-views",
+            "9",
+        ];
+        let m = TrainOverrides::command().get_matches_from(argv);
+        let o = TrainOverrides::from_arg_matches(&m).unwrap();
+        let c = o.apply(Method::Unispine, Some(100)).unwrap();
+        let mut want = TrainConfig::preset(Method::Unispine);
+        want.iterations = 100;
+        want.seed = 7;
+        want.color = ColorMode::Sh;
+        want.init.kind = InitKind::Random;
+        want.init.interval = 3;
+        want.init.intensity = 0.25;
+        want.loss.data_term = DataTerm::L1;
+        want.loss.lambda_dssim = 0.5;
+        want.spwm = None;
+        want.densify.max_gaussians = Some(99);
+        want.densify.grad_threshold = 0.001;
+        want.densify.from_iter = 11;
+        want.densify.until_iter = 12;
+        want.densify.interval = 13;
+        want.densify.upstream_radii_reset = true;
+        want.lr.position_init = 0.5;
+        want.lr.position_final = 0.25;
+        want.eval_iterations = vec![4, 5];
+        want.train_views = Some(6);
+        want.checkpoint_every = 8;
+        want.preview_views = 9;
+        assert_eq!(c, want);
+        // A flag is validated like the config field it sets.
+        let m = TrainOverrides::command().get_matches_from(["train", "--lambda-dssim", "2"]);
+        let e = TrainOverrides::from_arg_matches(&m)
+            .unwrap()
+            .apply(Method::Unispine, None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("loss.lambda_dssim") && e.contains("[0, 1]"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_compressed_config_is_not_compressed_twice() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut c = TrainConfig::preset(Method::Unispine);
+        c.iterations = 2000;
+        c.compress_schedule();
+        let p = dir.path().join("config.json");
+        c.save(&p).unwrap();
+        let o = TrainOverrides {
+            config: Some(p.clone()),
+            ..Default::default()
+        };
+        assert_eq!(o.apply(Method::Unispine, None).unwrap(), c);
+        let o = TrainOverrides {
+            config: Some(p),
+            compress_schedule: true,
+            ..Default::default()
+        };
+        let e = o.apply(Method::Unispine, None).unwrap_err().to_string();
+        assert!(e.contains("already compressed"), "{e}");
+    }
+}
