@@ -32,7 +32,7 @@ use crate::error::{Error, Result};
 use crate::eval::{self, EvalResult, ViewMetrics};
 use crate::field::{Field, FieldConfig};
 use crate::image2d::Image2d;
-use crate::train::{EvalPoint, Event, Metrics};
+use crate::train::{EvalPoint, Event, Method, Metrics};
 use crate::volume::Volume;
 
 /// A baseline method.
@@ -69,6 +69,52 @@ impl Baseline {
             .into_iter()
             .find(|p| *p == name)
             .map(Baseline::Field)
+    }
+}
+
+/// A method of `unispine train --method`: a Gaussian preset of [`crate::train`] or a baseline.
+/// The one list of method names, read by the command line and by reproduction plans.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TrainMethod {
+    Gaussians(Method),
+    Baseline(Baseline),
+}
+
+impl TrainMethod {
+    /// The Gaussian preset, when the method is one.
+    pub fn gaussians(self) -> Option<Method> {
+        match self {
+            TrainMethod::Gaussians(m) => Some(m),
+            TrainMethod::Baseline(_) => None,
+        }
+    }
+
+    /// Every method name with its one line of help (empty for the baselines): the presets in
+    /// declaration order, then the baselines in table order.
+    pub fn all() -> Vec<(&'static str, String)> {
+        let presets = <Method as clap::ValueEnum>::value_variants()
+            .iter()
+            .map(|m| {
+                let help = clap::ValueEnum::to_possible_value(m)
+                    .and_then(|v| v.get_help().map(|h| h.to_string()))
+                    .unwrap_or_default();
+                (m.name(), help)
+            });
+        let baselines = Baseline::names().into_iter().map(|b| (b, String::new()));
+        presets.chain(baselines).collect()
+    }
+
+    /// The method called `name`; the error lists every name.
+    pub fn parse(name: &str) -> std::result::Result<TrainMethod, String> {
+        if let Some(b) = Baseline::parse(name) {
+            return Ok(TrainMethod::Baseline(b));
+        }
+        <Method as clap::ValueEnum>::from_str(name, false)
+            .map(TrainMethod::Gaussians)
+            .map_err(|_| {
+                let names: Vec<&str> = TrainMethod::all().into_iter().map(|m| m.0).collect();
+                format!("unknown method `{name}` (one of: {})", names.join(", "))
+            })
     }
 }
 

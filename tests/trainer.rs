@@ -5,12 +5,12 @@
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use clap::Parser;
+use clap::FromArgMatches;
 use unispine::error::Error;
 use unispine::gaussians::ply;
 use unispine::image2d::Image2d;
 use unispine::render::{self, ColorMode};
-use unispine::train::{self, Event, Method, RunDir, TrainConfig, Trainer};
+use unispine::train::{self, Event, Method, RunDir, TrainConfig, TrainOverrides, Trainer};
 
 #[path = "common/tiny.rs"]
 mod tiny;
@@ -198,34 +198,24 @@ fn presets_parse_and_round_trip() {
     assert_eq!(s.init.kind, unispine::gaussians::init::InitKind::Random);
     let x = TrainConfig::preset(Method::Xgaussian);
     assert!(x.spwm.is_none() && x.loss.data_term == unispine::loss::DataTerm::L1);
-    // Command line: preset + flag-by-flag overrides.
-    let cli = unispine::cli::Cli::try_parse_from([
-        "unispine",
-        "train",
-        "--data",
-        "d",
-        "--method",
-        "3dgs",
-        "--out",
-        "o",
-        "--iters",
-        "50",
-        "--color",
-        "rirf-paper",
-        "--spwm",
-        "true",
-        "--max-gaussians",
-        "1000",
-        "--eval-iterations",
-        "10,20",
-    ])
-    .unwrap();
-    let unispine::cli::Command::Train(a) = cli.command else {
-        panic!()
-    };
-    let c = a
-        .overrides
-        .apply(a.method.gaussians().unwrap(), a.iters)
+    // Command line: preset + flag-by-flag overrides, parsed by the library's settings table.
+    let method = unispine::baseline::TrainMethod::parse("3dgs").unwrap();
+    let m = TrainOverrides::command()
+        .try_get_matches_from([
+            "train",
+            "--color",
+            "rirf-paper",
+            "--spwm",
+            "true",
+            "--max-gaussians",
+            "1000",
+            "--eval-iterations",
+            "10,20",
+        ])
+        .unwrap();
+    let c = TrainOverrides::from_arg_matches(&m)
+        .unwrap()
+        .apply(method.gaussians().unwrap(), Some(50))
         .unwrap();
     assert_eq!(c.method, Method::Gs3d);
     assert_eq!(c.iterations, 50);
@@ -233,10 +223,14 @@ fn presets_parse_and_round_trip() {
     assert!(c.spwm.is_some());
     assert_eq!(c.densify.max_gaussians, Some(1000));
     assert_eq!(c.eval_points(), vec![10, 20, 50]);
-    assert!(unispine::cli::Cli::try_parse_from([
-        "unispine", "train", "--data", "d", "--out", "o", "--color", "rgb"
-    ])
-    .is_err());
+    assert!(TrainOverrides::command()
+        .try_get_matches_from(["train", "--color", "rgb"])
+        .is_err());
+    assert!(unispine::baseline::TrainMethod::parse("rgb").is_err());
+    assert!(unispine::baseline::TrainMethod::parse("fdk")
+        .unwrap()
+        .gaussians()
+        .is_none());
 }
 
 #[test]

@@ -72,7 +72,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
     if args.jobs == 0 {
         anyhow::bail!("invalid `--jobs`: must be >= 1");
     }
-    let schema = TrainSchema::from_cli();
+    let schema = TrainSchema::of_train();
     let plan = Plan::load(plan_arg, &schema)?;
     let out = args
         .out

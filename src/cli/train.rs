@@ -12,7 +12,7 @@ use anyhow::{bail, Context};
 
 use super::progress::Progress;
 use super::signals;
-use crate::baseline::Baseline;
+use crate::baseline::{Baseline, TrainMethod};
 use crate::error::Error;
 use crate::train::{self, Control, Event, Method, RunDir, TrainOverrides};
 
@@ -25,7 +25,7 @@ pub struct TrainArgs {
     /// Method: a Gaussian preset (unispine, xgaussian, 3dgs, spwm-only) or a baseline (fdk,
     /// naf, intratomo, nerf, naf-full, intratomo-full, nerf-full).
     #[arg(long, default_value = "unispine", value_parser = MethodParser)]
-    pub method: MethodArg,
+    pub method: TrainMethod,
     /// Training iterations (paper: 20000).
     #[arg(long)]
     pub iters: Option<usize>,
@@ -69,8 +69,8 @@ pub fn init_threads(threads: Option<usize>) -> anyhow::Result<()> {
 /// Run `unispine train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let method = match args.method {
-        MethodArg::Gaussians(m) => m,
-        MethodArg::Baseline(b) => return run_baseline(b, &args),
+        TrainMethod::Gaussians(m) => m,
+        TrainMethod::Baseline(b) => return run_baseline(b, &args),
     };
     init_threads(args.threads)?;
     if args.resume.is_some() && method != Method::Unispine {
@@ -209,40 +209,23 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `--method`: a Gaussian preset or a baseline of [`crate::baseline`].
-#[derive(Clone, Copy, Debug)]
-pub enum MethodArg {
-    Gaussians(Method),
-    Baseline(Baseline),
-}
-
-impl MethodArg {
-    /// The Gaussian preset, when `--method` names one.
-    pub fn gaussians(self) -> Option<Method> {
-        match self {
-            MethodArg::Gaussians(m) => Some(m),
-            MethodArg::Baseline(_) => None,
-        }
-    }
-}
-
-/// The `--method` parser: our own error message for an unknown name, and the list of every
-/// preset and baseline as clap's possible values (shown by `--help`, read by the reproduction
-/// harness to validate plans).
+/// The `--method` parser over the library's list of methods ([`TrainMethod`]): its error
+/// message for an unknown name, and every preset and baseline as clap's possible values (shown
+/// by `--help`).
 #[derive(Clone, Copy, Debug)]
 struct MethodParser;
 
 impl clap::builder::TypedValueParser for MethodParser {
-    type Value = MethodArg;
+    type Value = TrainMethod;
 
     fn parse_ref(
         &self,
         cmd: &clap::Command,
         _arg: Option<&clap::Arg>,
         value: &std::ffi::OsStr,
-    ) -> Result<MethodArg, clap::Error> {
+    ) -> Result<TrainMethod, clap::Error> {
         let s = value.to_str().unwrap_or("");
-        parse_method(s).map_err(|e| {
+        TrainMethod::parse(s).map_err(|e| {
             clap::Error::raw(clap::error::ErrorKind::InvalidValue, e + "\n").with_cmd(cmd)
         })
     }
@@ -250,30 +233,17 @@ impl clap::builder::TypedValueParser for MethodParser {
     fn possible_values(
         &self,
     ) -> Option<Box<dyn Iterator<Item = clap::builder::PossibleValue> + '_>> {
-        let presets = <Method as clap::ValueEnum>::value_variants()
-            .iter()
-            .filter_map(clap::ValueEnum::to_possible_value);
-        let baselines = Baseline::names()
-            .into_iter()
-            .map(clap::builder::PossibleValue::new);
-        Some(Box::new(presets.chain(baselines)))
+        Some(Box::new(TrainMethod::all().into_iter().map(
+            |(name, help)| {
+                let v = clap::builder::PossibleValue::new(name);
+                if help.is_empty() {
+                    v
+                } else {
+                    v.help(help)
+                }
+            },
+        )))
     }
-}
-
-fn parse_method(s: &str) -> Result<MethodArg, String> {
-    if let Some(b) = Baseline::parse(s) {
-        return Ok(MethodArg::Baseline(b));
-    }
-    <Method as clap::ValueEnum>::from_str(s, false)
-        .map(MethodArg::Gaussians)
-        .map_err(|_| {
-            let mut names: Vec<&str> = <Method as clap::ValueEnum>::value_variants()
-                .iter()
-                .map(|m| m.name())
-                .collect();
-            names.extend(Baseline::names());
-            format!("unknown method `{s}` (one of: {})", names.join(", "))
-        })
 }
 
 /// `unispine train --method BASELINE`: the baseline's own trainer, the same run folder

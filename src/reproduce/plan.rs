@@ -43,7 +43,9 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
+use crate::baseline::TrainMethod;
 use crate::error::{Error, Result};
+use crate::train::TrainOverrides;
 
 /// The `unispine train` flags a plan cannot set: the harness sets them for every cell.
 pub const HARNESS_FLAGS: [&str; 7] = [
@@ -54,50 +56,29 @@ pub const HARNESS_FLAGS: [&str; 7] = [
 /// not name itself.
 pub const ALL_PRESETS: &str = "all-presets";
 
-/// What `unispine train` accepts: its method names and its flags (long name, takes a value).
-/// Built from the command-line definition itself ([`TrainSchema::from_cli`]), so a method or
-/// flag added to `unispine train` is known to plans without a second list.
+/// What `unispine train` accepts: its method names ([`TrainMethod::all`]) and the flags of its
+/// settings ([`TrainOverrides`], long name and whether it takes a value). Built from the
+/// library's declarations, so a method or setting added to `unispine train` is known to plans
+/// without a second list.
 #[derive(Clone, Debug)]
 pub struct TrainSchema {
     pub methods: Vec<String>,
-    /// One line of help per method (from `unispine train --help`).
+    /// One line of help per method (as `unispine train --help` shows it).
     pub method_help: Vec<(String, String)>,
     pub flags: Vec<(String, bool)>,
 }
 
 impl TrainSchema {
     /// The schema of this build's `unispine train`.
-    pub fn from_cli() -> Self {
-        use clap::CommandFactory;
-        let cmd = crate::cli::Cli::command();
-        let train = cmd
-            .find_subcommand("train")
-            .expect("the CLI has a train subcommand");
-        let mut methods = Vec::new();
-        let mut method_help = Vec::new();
-        let mut flags = Vec::new();
-        for a in train.get_arguments() {
-            let Some(long) = a.get_long() else { continue };
-            if long == "method" {
-                methods = a
-                    .get_possible_values()
-                    .iter()
-                    .map(|v| v.get_name().to_string())
-                    .collect();
-                method_help = a
-                    .get_possible_values()
-                    .iter()
-                    .map(|v| {
-                        let h = v.get_help().map(|h| h.to_string()).unwrap_or_default();
-                        (v.get_name().to_string(), h)
-                    })
-                    .collect();
-            }
-            flags.push((long.to_string(), a.get_action().takes_values()));
-        }
+    pub fn of_train() -> Self {
+        let all = TrainMethod::all();
+        let flags = TrainOverrides::command()
+            .get_arguments()
+            .filter_map(|a| Some((a.get_long()?.to_string(), a.get_action().takes_values())))
+            .collect();
         TrainSchema {
-            methods,
-            method_help,
+            methods: all.iter().map(|m| m.0.to_string()).collect(),
+            method_help: all.into_iter().map(|(m, h)| (m.to_string(), h)).collect(),
             flags,
         }
     }
@@ -319,16 +300,15 @@ fn flags_to_args(
     Ok(args)
 }
 
-/// Check `args` with the real `unispine train` parser; a message on failure.
+/// Check the variant `args` of method `base` with the parser of `unispine train`'s settings
+/// ([`TrainOverrides`]); a message on failure.
 fn check_train_args(base: &str, args: &[String]) -> std::result::Result<(), String> {
-    use clap::Parser;
-    let mut argv: Vec<String> = ["unispine", "train", "--data", "D", "--out", "O", "--method"]
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
-    argv.push(base.to_string());
-    argv.extend(args.iter().cloned());
-    crate::cli::Cli::try_parse_from(argv)
+    use clap::FromArgMatches;
+    TrainMethod::parse(base)?;
+    let argv = std::iter::once("train".to_string()).chain(args.iter().cloned());
+    TrainOverrides::command()
+        .try_get_matches_from(argv)
+        .and_then(|m| TrainOverrides::from_arg_matches(&m))
         .map(|_| ())
         .map_err(|e| {
             let s = e.to_string();
@@ -698,7 +678,7 @@ mod tests {
 
     fn parse(t: &str) -> Result<Plan> {
         let dir = std::env::temp_dir();
-        Plan::parse(t, Path::new("p.toml"), &dir, &TrainSchema::from_cli())
+        Plan::parse(t, Path::new("p.toml"), &dir, &TrainSchema::of_train())
     }
 
     const OK: &str = "name = \"t\"\niters = 10\nseeds = [0, 1]\nmethods = [\"unispine\", \"v\"]\n\
@@ -765,7 +745,7 @@ mod tests {
 
     #[test]
     fn every_builtin_plan_parses() {
-        let schema = TrainSchema::from_cli();
+        let schema = TrainSchema::of_train();
         for (name, text) in BUILTIN {
             // Paths of built-in plans may be absent here; only optional datasets use `path`.
             let p = Plan::parse(text, Path::new(name), Path::new("."), &schema)
@@ -776,9 +756,16 @@ mod tests {
 
     #[test]
     fn schema_lists_the_presets() {
-        let s = TrainSchema::from_cli();
-        for m in ["unispine", "xgaussian", "3dgs", "spwm-only"] {
+        let s = TrainSchema::of_train();
+        for m in ["unispine", "xgaussian", "3dgs", "spwm-only", "fdk", "naf"] {
             assert!(s.methods.iter().any(|x| x == m), "{m} in {:?}", s.methods);
         }
+        let help = |m: &str| s.method_help.iter().find(|h| h.0 == m).unwrap().1.clone();
+        assert!(help("unispine").contains("SPWM") && help("fdk").is_empty());
+        // The settings' flags, switch or valued, and none of the harness's own.
+        for (flag, takes) in [("color", true), ("spwm", true), ("compress-schedule", false)] {
+            assert_eq!(s.flag(flag), Some(&(flag.to_string(), takes)), "{flag}");
+        }
+        assert!(s.flag("resume").is_none() && s.flag("out").is_none());
     }
 }

@@ -144,7 +144,7 @@ mod tests {
             text,
             Path::new("quick"),
             Path::new("."),
-            &TrainSchema::from_cli(),
+            &TrainSchema::of_train(),
         )
         .unwrap();
         let s = scripts(
