@@ -322,7 +322,8 @@ mod tests {
 
     #[test]
     fn acui_grid_matches_upstream_layout() {
-        // 256 voxels at 1 mm, every 8: 32 per axis from -127.5 to 120.5 (research section 3).
+        // 256 voxels at 1 mm, every 8: 32 per axis from -127.5 to 120.5 (X-Gaussian
+        // `pt_positions[::interval, ...]` over `linspace(-s, s, n)`, `s = sVoxel / 2 - dVoxel / 2`).
         let p = acui_positions(&geo([256, 256, 256], [1.0; 3]), 8).unwrap();
         assert_eq!(p.len(), 32 * 32 * 32);
         assert_eq!(p[0], [-127.5; 3]);
@@ -375,7 +376,8 @@ mod tests {
                 assert_eq!(g.quats[0], [1.0, 0.0, 0.0, 0.0]);
             }
         }
-        // Upstream's uint8 round trip: f_dc = (127/255 - 0.5) / C0 = -0.00695 (research section 3).
+        // Upstream's uint8 round trip of `points3d.ply` (X-Gaussian `scene/dataset_readers.py`):
+        // f_dc = (127/255 - 0.5) / C0 = -0.00695.
         let f = feature_for_intensity(ColorMode::RirfXgaussian, 127.0 / 255.0);
         assert!((f + 0.006_951_4).abs() < 1e-6, "{f}");
     }

@@ -23,7 +23,9 @@
 //! training default. It is what the code that introduced the RIRF trains with, and the
 //! learning rates of the table were tuned for it; the paper's `sigmoid(lambda . f)` is
 //! `--color rirf-paper`. (UniSpine-GS's code at HEAD renders view-dependent SH, i.e. the
-//! `3dgs` colour; research section 0.)
+//! `3dgs` colour: its vendored
+//! `submodules/diff-gaussian-rasterization/cuda_rasterizer/forward.cu` is the view-dependent
+//! 3DGS SH rasterizer since commit `adf0330`.)
 
 use std::path::Path;
 
