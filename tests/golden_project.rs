@@ -20,7 +20,7 @@ use unispine::gaussians::Gaussians;
 use unispine::geometry::{ConeBeam, Mode};
 use unispine::math::covariance::covariance;
 use unispine::render::project::{self, intensity};
-use unispine::render::{ColorMode, RenderSettings};
+use unispine::render::RenderSettings;
 
 const TOL: f64 = 1e-10;
 const ACTIVE: [usize; 4] = [1, 4, 9, 16];
@@ -235,7 +235,7 @@ fn cases() -> Vec<(&'static str, &'static str, Value)> {
 
 // ---------------------------------------------------------------- the Rust outputs
 
-fn compute(folder: &str, stem: &str, inputs: &Value) -> Value {
+fn compute(folder: &str, inputs: &Value) -> Value {
     match folder {
         "eq01-covariance" => {
             let ls = rows::<3>(inputs, "log_scales");
@@ -249,25 +249,7 @@ fn compute(folder: &str, stem: &str, inputs: &Value) -> Value {
         }
         "eq02-rirf" => {
             let f = rows::<16>(inputs, "features");
-            let mode: ColorMode = serde_json::from_value(inputs["color_mode"].clone())
-                .unwrap_or_else(|e| panic!("{stem}: `color_mode`: {e}"));
-            let (means, centre) = if mode == ColorMode::Sh {
-                let c: Vec<f64> = inputs["camera_centre"]
-                    .as_array()
-                    .unwrap()
-                    .iter()
-                    .map(|x| x.as_f64().unwrap())
-                    .collect();
-                (rows::<3>(inputs, "means"), [c[0], c[1], c[2]])
-            } else {
-                (vec![[0.0; 3]; f.len()], [0.0; 3])
-            };
-            let actives: Vec<usize> = inputs["active_features"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|x| x.as_u64().unwrap() as usize)
-                .collect();
+            let (mode, means, centre, actives) = intensity_inputs(inputs, f.len());
             let mut out = Vec::new();
             for &k in &actives {
                 for i in 0..f.len() {
@@ -302,10 +284,10 @@ fn golden_files_match_the_rust_projection() {
     let mut checked = 0;
     for (folder, stem, mut c) in cases() {
         if regen_requested() {
-            c["outputs"] = compute(folder, stem, &c["inputs"]);
+            c["outputs"] = compute(folder, &c["inputs"]);
             write_case(folder, stem, &c);
         }
-        check_case(folder, stem, |inputs| compute(folder, stem, inputs));
+        check_case(folder, stem, |inputs| compute(folder, inputs));
         checked += 1;
     }
     assert_eq!(checked, 7);

@@ -160,24 +160,7 @@ fn compute(folder: &str, inputs: &Value) -> Value {
         "eq02-rirf-vjp" => {
             let f = rows::<16>(inputs, "features");
             let n = f.len();
-            let mode: ColorMode = serde_json::from_value(inputs["color_mode"].clone()).unwrap();
-            let (means, centre) = if mode == ColorMode::Sh {
-                let c: Vec<f64> = inputs["camera_centre"]
-                    .as_array()
-                    .unwrap()
-                    .iter()
-                    .map(|x| x.as_f64().unwrap())
-                    .collect();
-                (rows::<3>(inputs, "means"), [c[0], c[1], c[2]])
-            } else {
-                (vec![[0.0; 3]; n], [0.0; 3])
-            };
-            let actives: Vec<usize> = inputs["active_features"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|x| x.as_u64().unwrap() as usize)
-                .collect();
+            let (mode, means, centre, actives) = intensity_inputs(inputs, n);
             let (_, gi) = get_arr(inputs, "d_intensity");
             let (mut df, mut dm) = (Vec::new(), Vec::new());
             for (j, &k) in actives.iter().enumerate() {

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{json, Value};
 use unispine::image2d::Image2d;
+use unispine::render::ColorMode;
 
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -225,4 +226,29 @@ pub fn run_numpy_reference(script: &str) {
         String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
     println!("{text}");
     assert!(out.status.success(), "{script} failed:\n{text}");
+}
+
+/// The inputs of an Eq. (2) intensity case for `n` Gaussians: the colour mode, the means and
+/// camera centre (zeros unless the mode is view-dependent SH) and the active feature counts.
+pub fn intensity_inputs(v: &Value, n: usize) -> (ColorMode, Vec<[f64; 3]>, [f64; 3], Vec<usize>) {
+    let mode: ColorMode = serde_json::from_value(v["color_mode"].clone())
+        .unwrap_or_else(|e| panic!("`color_mode`: {e}"));
+    let (means, centre) = if mode == ColorMode::Sh {
+        let c: Vec<f64> = v["camera_centre"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        (rows::<3>(v, "means"), [c[0], c[1], c[2]])
+    } else {
+        (vec![[0.0; 3]; n], [0.0; 3])
+    };
+    let actives: Vec<usize> = v["active_features"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_u64().unwrap() as usize)
+        .collect();
+    (mode, means, centre, actives)
 }
