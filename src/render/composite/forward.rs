@@ -1,0 +1,226 @@
+//! Forward pass of the compositor, Eqs. (4)-(5): per tile, front-to-back alpha compositing of
+//! the tile's work list in lane vectors of 8 or 16 pixels, recording per pixel the final
+//! transmittance and `n_contrib`, and per tile the work-list prefix the backward visits; then
+//! the tiles (computed in parallel) are assembled into the image in tile order.
+
+use rayon::prelude::*;
+
+use super::super::lanes::{exp_k, mask, power_of, sel};
+use super::super::tiles::{self, TileBins, TILE};
+use super::dispatch::{self, Kernel};
+use super::worklist::{half_bits, halves, pack, tile_entries, Entry, Packed, WorkLists};
+use super::{CompositeSaved, Splats, ALPHA_MAX, ALPHA_MIN, TP, T_MIN};
+use crate::image2d::Image2d;
+use crate::real::Real;
+use crate::simd::Simd;
+
+/// Per-tile forward result: colour (without background), final T, n_contrib, tile-local, and
+/// the prefix of the work list up to the largest n_contrib (what the backward visits).
+pub(super) struct TileOut<R> {
+    color: [R; TP],
+    t: [R; TP],
+    last: [u32; TP],
+    blends: u64,
+    work: Vec<Entry<R>>,
+}
+
+/// The forward kernel of tile `t`, `W` pixels per lane vector (8: one 8-column half of a tile
+/// row, the AVX2 width; 16: a whole tile row, the AVX-512 width). Both widths do the same IEEE
+/// operations per pixel and give the same bits: a vector covering a half the chord test ruled
+/// out masks that half's lanes (they would fail `alpha >= 1/255`), one covering a done half
+/// masks it through `done`.
+#[inline(always)]
+pub(super) fn forward_tile<R: Real, const W: usize>(
+    packed: &[Option<Packed<R>>],
+    bins: &TileBins,
+    t: usize,
+) -> TileOut<R> {
+    const { assert!(W == 8 || W == 16) };
+    let [x0, x1, y0, y1] = bins.pixel_rect(t);
+    let npix = ((x1 - x0) * (y1 - y0)) as u32;
+    let mut out = TileOut {
+        color: [R::zero(); TP],
+        t: [R::one(); TP],
+        last: [0u32; TP],
+        blends: 0,
+        work: Vec::new(),
+    };
+    let mut done = [0u32; TP];
+    let mut n_done = 0u32;
+    // Pixels done per 8-column half of each tile row; a half (or row) whose pixels are all
+    // done is skipped: every lane would fail the `!done` test, so skipping it changes no bit.
+    let mut half_done = [[0u32; 2]; TILE];
+    // Image pixels per half (fewer at the right edge of the image, 0 beyond it).
+    let half_len: [u32; 2] = std::array::from_fn(|h| (x1 - x0).saturating_sub(8 * h).min(8) as u32);
+    let (amax, amin, tmin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN), R::c(T_MIN));
+    let one = R::one();
+    let half = R::c(0.5);
+    // Pixel-centre x coordinates of the tile's columns.
+    let xs: [R; TILE] = std::array::from_fn(|k| R::c((x0 + k) as f64) + half);
+    // The whole work list is gathered first (independent loads, so the cache misses of the
+    // random per-splat reads overlap); its prefix up to the largest n_contrib is kept for the
+    // backward.
+    let mut entries = tile_entries(packed, bins, t, false);
+    for (j, e) in entries.iter_mut().enumerate() {
+        if n_done == npix {
+            break;
+        }
+        // The chord test of each visited row, recorded in `halves` for the backward. A row the
+        // forward skips here (all its pixels done before entry j) has n_contrib <= j at every
+        // pixel, so the backward skips it too and its bits are never read.
+        let Some(Packed { chord, .. }) = packed[e.id as usize].as_ref() else {
+            unreachable!("work-list entries come from packed splats")
+        };
+        let mut bits = 0u32;
+        let tag = j as u32 + 1;
+        let (k0, k1) = (e.x0 as usize - x0, e.x1 as usize - x0);
+        let colm: [u32; TILE] = std::array::from_fn(|k| mask(k0 <= k && k < k1));
+        for row in e.y0 as usize..e.y1 as usize {
+            let hd = &mut half_done[row - y0];
+            if *hd == half_len {
+                continue;
+            }
+            let dy = R::c(row as f64) + half - e.my;
+            let base = (row - y0) * TILE;
+            let hv = halves(chord, row, x0);
+            bits |= half_bits(hv, row - y0);
+            let go = [hv[0] && hd[0] != half_len[0], hv[1] && hd[1] != half_len[1]];
+            for v in 0..TILE / W {
+                let (c0, h0) = (v * W, v * W / 8);
+                if !go[h0..h0 + W / 8].iter().any(|&g| g) {
+                    continue;
+                }
+                // Lanes in the entry's box and in a half that meets the chord (with 8 lanes
+                // the half is visited only when it meets it).
+                let act: [u32; W] = if W == 8 {
+                    colm[c0..c0 + W].try_into().unwrap()
+                } else {
+                    std::array::from_fn(|k| colm[c0 + k] & mask(hv[(c0 + k) / 8]))
+                };
+                let mut nb = 0u32;
+                let mut nd = 0u32;
+                let mut stops = [0u32; W];
+                let o = base + c0;
+                let tr: &mut [R; W] = (&mut out.t[o..o + W]).try_into().unwrap();
+                let cr: &mut [R; W] = (&mut out.color[o..o + W]).try_into().unwrap();
+                let lr: &mut [u32; W] = (&mut out.last[o..o + W]).try_into().unwrap();
+                let dr: &mut [u32; W] = (&mut done[o..o + W]).try_into().unwrap();
+                let xh: &[R; W] = xs[c0..c0 + W].try_into().unwrap();
+                // Branch-free over the W columns (vectorises; masked-out columns keep their
+                // values); selects reproduce the sequential skip / stop / blend logic exactly.
+                for k in 0..W {
+                    let dx = xh[k] - e.mx;
+                    let pw = power_of(e.a, e.b, e.c, dx, dy);
+                    let og = e.o * exp_k(pw);
+                    let alpha = sel(mask(og > amax), amax, og);
+                    let tt = tr[k];
+                    let next = tt * (one - alpha);
+                    let valid = act[k] & !dr[k] & mask(pw <= R::zero()) & mask(alpha >= amin);
+                    let stop = valid & mask(next < tmin);
+                    let blend = valid & !stop;
+                    let c_new = cr[k] + e.col * alpha * tt;
+                    cr[k] = sel(blend, c_new, cr[k]);
+                    tr[k] = sel(blend, next, tt);
+                    lr[k] = (tag & blend) | (lr[k] & !blend);
+                    dr[k] |= stop;
+                    nb += blend & 1;
+                    if W == 8 {
+                        nd += stop & 1;
+                    } else {
+                        stops[k] = stop & 1;
+                    }
+                }
+                out.blends += nb as u64;
+                if W == 8 {
+                    n_done += nd;
+                    hd[h0] += nd;
+                } else {
+                    for (h, s) in stops.chunks_exact(8).enumerate() {
+                        let nd: u32 = s.iter().sum();
+                        n_done += nd;
+                        hd[h0 + h] += nd;
+                    }
+                }
+            }
+        }
+        e.halves = bits;
+    }
+    // The backward visits the entries before the largest n_contrib only.
+    entries.truncate(out.last.iter().copied().max().unwrap_or(0) as usize);
+    out.work = entries;
+    out
+}
+
+/// Composite `splats` into a `width` x `height` image over `background` (Eqs. 4-5).
+///
+/// Splats with radius 0 or any non-finite screen-space field are not drawn (see
+/// [`tiles::drawn`]; [`validate`](super::validate) reports the latter as an error).
+pub fn forward<R: Real>(
+    splats: &Splats<R>,
+    width: usize,
+    height: usize,
+    background: R,
+) -> (Image2d<R>, CompositeSaved<R>) {
+    forward_with(Simd::active(), splats, width, height, background)
+}
+
+/// [`forward`] with the tile kernels compiled for `simd` (or, when the CPU lacks it, for the
+/// widest supported narrower set). Every path gives the same bits.
+pub fn forward_with<R: Real>(
+    simd: Simd,
+    splats: &Splats<R>,
+    width: usize,
+    height: usize,
+    background: R,
+) -> (Image2d<R>, CompositeSaved<R>) {
+    forward_kernel(Kernel::of(simd), splats, width, height, background)
+}
+
+pub(crate) fn forward_kernel<R: Real>(
+    kernel: Kernel,
+    splats: &Splats<R>,
+    width: usize,
+    height: usize,
+    background: R,
+) -> (Image2d<R>, CompositeSaved<R>) {
+    let bins = tiles::bin(splats, width, height);
+    let packed = pack(splats, &bins);
+    let mut outs: Vec<TileOut<R>> = (0..bins.n_tiles())
+        .into_par_iter()
+        .map(|t| dispatch::forward_tile(kernel, &packed, &bins, t))
+        .collect();
+    let work = WorkLists {
+        tiles: outs
+            .iter_mut()
+            .map(|o| std::mem::take(&mut o.work))
+            .collect(),
+    };
+    let mut img = Image2d::filled(width, height, R::zero());
+    let mut final_t = vec![R::one(); width * height];
+    let mut n_contrib = vec![0u32; width * height];
+    let mut blends = 0;
+    for (t, o) in outs.iter().enumerate() {
+        blends += o.blends;
+        let [x0, x1, y0, y1] = bins.pixel_rect(t);
+        for row in y0..y1 {
+            for col in x0..x1 {
+                let p = (row - y0) * TILE + col - x0;
+                let q = row * width + col;
+                img.data[q] = o.color[p] + o.t[p] * background;
+                final_t[q] = o.t[p];
+                n_contrib[q] = o.last[p];
+            }
+        }
+    }
+    (
+        img,
+        CompositeSaved {
+            bins,
+            background,
+            final_t,
+            n_contrib,
+            blends,
+            work,
+        },
+    )
+}
