@@ -21,7 +21,7 @@
 //! is row `a` of TransformMatrix as written (the direction of array axis `a`; ITK's MetaImageIO
 //! reads it the same way). It is not applied: index (i, j, k) is our (x, y, z), centred.
 
-use super::{byte_count, decode, read_bytes, Elem, Provenance, Volume};
+use super::{byte_count, decode, from_file, read_bytes, Elem, Volume};
 use crate::error::{Error, Result};
 use std::io::Read;
 use std::path::Path;
@@ -400,26 +400,13 @@ pub fn read(path: &Path) -> Result<Volume<f32>> {
             if big_endian { "big" } else { "little" }
         ),
     );
-    let file_affine = if affine.iter().flatten().all(|v| v.is_finite()) {
-        steps
-            .push("file affine from Offset and TransformMatrix; recorded, not applied".to_string());
-        Some(affine)
-    } else {
-        steps.push(format!(
-            "file affine from Offset and TransformMatrix has a NaN or infinite entry \
-             ({affine:?}); dropped (it is informational only: placement never uses it)"
-        ));
-        None
-    };
-    Ok(Volume {
+    Ok(from_file(
+        path,
         data,
         dims,
         spacing,
-        offset: [0.0; 3],
-        provenance: Provenance {
-            source: path.display().to_string(),
-            file_affine,
-            steps,
-        },
-    })
+        affine,
+        ("Offset and TransformMatrix", None),
+        steps,
+    ))
 }

@@ -22,7 +22,7 @@
 //!   before reading it.
 //! - The array index (i, j, k) is our (x, y, z); the volume is centred (offset 0).
 
-use super::{byte_count, decode, open_regular, Elem, Provenance, Volume};
+use super::{byte_count, decode, from_file, open_regular, Elem, Volume};
 use crate::error::{Error, Result};
 use std::io::Read;
 use std::path::Path;
@@ -491,27 +491,13 @@ pub fn read(path: &Path) -> Result<Volume<f32>> {
             h.scl_slope
         ),
     });
-    let file_affine = if affine.iter().flatten().all(|v| v.is_finite()) {
-        steps.push(format!(
-            "file affine from {affine_from}, in mm; recorded, not applied"
-        ));
-        Some(affine)
-    } else {
-        steps.push(format!(
-            "file affine from {affine_from} has a NaN or infinite entry (in mm: {affine:?}); \
-             dropped (it is informational only: placement never uses it)"
-        ));
-        None
-    };
-    Ok(Volume {
+    Ok(from_file(
+        path,
         data,
-        dims: h.dims,
+        h.dims,
         spacing,
-        offset: [0.0; 3],
-        provenance: Provenance {
-            source: path.display().to_string(),
-            file_affine,
-            steps,
-        },
-    })
+        affine,
+        (&affine_from, Some("mm")),
+        steps,
+    ))
 }
