@@ -199,24 +199,32 @@ fn check_box(dims: [usize; 3], b: &IndexBox) -> Result<()> {
 pub fn crop<R: Real>(vol: &Volume<R>, b: &IndexBox) -> Result<Volume<R>> {
     check_box(vol.dims, b)?;
     let nd = b.dims();
-    let mut provenance = vol.provenance.clone();
-    provenance.steps.push(format!(
+    let note = format!(
         "cropped to voxels {:?} ..= {:?} ({nd:?} voxels), world placement kept",
         b.lo, b.hi
-    ));
-    Ok(Volume {
-        data: copy_box(&vol.data, vol.dims, b),
+    );
+    let data = copy_box(&vol.data, vol.dims, b);
+    Ok(regridded(vol, data, nd, b.lo.map(|x| x as f64), note))
+}
+
+/// `vol`'s voxels re-gridded to `data` on an `nd` grid whose voxel (0, 0, 0) is `vol`'s voxel
+/// `lo` (a crop or a pad), at the same world positions and voxel size; `note` is recorded.
+fn regridded<R: Real>(
+    vol: &Volume<R>,
+    data: Vec<R>,
+    nd: [usize; 3],
+    lo: [f64; 3],
+    note: String,
+) -> Volume<R> {
+    let mut provenance = vol.provenance.clone();
+    provenance.steps.push(note);
+    Volume {
+        data,
         dims: nd,
         spacing: vol.spacing,
-        offset: shifted_offset(
-            vol.dims,
-            vol.spacing,
-            vol.offset,
-            b.lo.map(|x| x as f64),
-            nd,
-        ),
+        offset: shifted_offset(vol.dims, vol.spacing, vol.offset, lo, nd),
         provenance,
-    })
+    }
 }
 
 /// Crop a label map to the index box `b`; the kept voxels stay at their world positions.
@@ -294,24 +302,11 @@ pub fn pad<R: Real>(vol: &Volume<R>, before: [usize; 3], after: [usize; 3], valu
             data[dst..dst + nx].copy_from_slice(&vol.data[src..src + nx]);
         }
     }
-    let mut provenance = vol.provenance.clone();
-    provenance.steps.push(format!(
+    let note = format!(
         "padded with {value}: {before:?} voxels before, {after:?} after ({nd:?} voxels), world \
          placement kept"
-    ));
-    Volume {
-        data,
-        dims: nd,
-        spacing: vol.spacing,
-        offset: shifted_offset(
-            vol.dims,
-            vol.spacing,
-            vol.offset,
-            before.map(|b| -(b as f64)),
-            nd,
-        ),
-        provenance,
-    }
+    );
+    regridded(vol, data, nd, before.map(|b| -(b as f64)), note)
 }
 
 /// Pad every axis to the largest physical extent (in whole voxels of that axis), split evenly
