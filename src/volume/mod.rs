@@ -332,6 +332,32 @@ impl Elem {
     }
 }
 
+/// Check a voxel grid: every voxel count at least 1 and every voxel size finite and > 0 mm,
+/// errors naming `{prefix}dims[a]` or `{prefix}spacing[a]`. Returns the number of voxels, or
+/// `None` when it overflows `usize`.
+pub(crate) fn check_grid(
+    prefix: &str,
+    dims: [usize; 3],
+    spacing: [f64; 3],
+) -> crate::error::Result<Option<usize>> {
+    for a in 0..3 {
+        if dims[a] == 0 {
+            return Err(crate::error::Error::invalid(
+                format!("{prefix}dims[{a}]"),
+                "voxel count must be at least 1",
+            ));
+        }
+        let d = spacing[a];
+        if !d.is_finite() || d <= 0.0 {
+            return Err(crate::error::Error::invalid(
+                format!("{prefix}spacing[{a}]"),
+                format!("voxel size must be finite and > 0 mm, got {d}"),
+            ));
+        }
+    }
+    Ok(dims.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d)))
+}
+
 /// A volume read from the file `path`, centred (offset 0). The file's own affine is recorded in
 /// the provenance, not applied, when all its entries are finite, and dropped with a note
 /// otherwise (placement never uses it). `from` says where the affine came from and `unit` its

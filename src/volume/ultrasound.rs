@@ -345,25 +345,7 @@ fn blur(data: &[f32], dims: [usize; 3], kernels: &[Vec<f64>; 3]) -> Vec<f32> {
 
 /// Check a label map's grid: non-zero dims, matching data length, finite positive spacing.
 fn check_labels(labels: &LabelMap) -> Result<()> {
-    for a in 0..3 {
-        if labels.dims[a] == 0 {
-            return Err(Error::invalid(
-                format!("labels.dims[{a}]"),
-                "voxel count must be at least 1",
-            ));
-        }
-        let d = labels.spacing[a];
-        if !d.is_finite() || d <= 0.0 {
-            return Err(Error::invalid(
-                format!("labels.spacing[{a}]"),
-                format!("voxel size must be finite and > 0 mm, got {d}"),
-            ));
-        }
-    }
-    let n = labels
-        .dims
-        .iter()
-        .try_fold(1usize, |acc, &d| acc.checked_mul(d));
+    let n = super::check_grid("labels.", labels.dims, labels.spacing)?;
     if n != Some(labels.data.len()) {
         return Err(Error::invalid(
             "labels.data",

@@ -183,26 +183,7 @@ impl PhantomSpec {
 
     /// Error naming the field when the spec cannot produce a phantom.
     pub fn validate(&self) -> Result<()> {
-        for a in 0..3 {
-            if self.dims[a] == 0 {
-                return Err(Error::invalid(
-                    format!("dims[{a}]"),
-                    "voxel count must be at least 1",
-                ));
-            }
-            let d = self.spacing[a];
-            if !d.is_finite() || d <= 0.0 {
-                return Err(Error::invalid(
-                    format!("spacing[{a}]"),
-                    format!("voxel size must be finite and > 0 mm, got {d}"),
-                ));
-            }
-        }
-        let n = self
-            .dims
-            .iter()
-            .try_fold(1usize, |acc, &d| acc.checked_mul(d))
-            .filter(|&n| n <= MAX_VOXELS);
+        let n = super::check_grid("", self.dims, self.spacing)?.filter(|&n| n <= MAX_VOXELS);
         if n.is_none() {
             return Err(Error::invalid(
                 "dims",
