@@ -467,16 +467,9 @@ mod tests {
     #[test]
     fn file_affine_notes() {
         let p = std::path::Path::new("v.nii");
+        let read = |a, from| from_file(p, vec![0.0], [1; 3], [1.0; 3], a, from, vec![]);
         let mut a = [[0.0; 4]; 4];
-        let v = from_file(
-            p,
-            vec![0.0],
-            [1; 3],
-            [1.0; 3],
-            a,
-            ("sform", Some("mm")),
-            vec![],
-        );
+        let v = read(a, ("sform", Some("mm")));
         assert_eq!(v.provenance.file_affine, Some(a));
         assert_eq!(
             v.provenance.steps,
@@ -487,31 +480,22 @@ mod tests {
             ([0.0; 3], "v.nii")
         );
         a[0][3] = f64::NAN;
-        let v = from_file(
-            p,
-            vec![0.0],
-            [1; 3],
-            [1.0; 3],
-            a,
-            ("sform", Some("mm")),
-            vec![],
-        );
+        let v = read(a, ("sform", Some("mm")));
         assert_eq!(v.provenance.file_affine, None);
+        let dropped = "dropped (it is informational only: placement never uses it)";
         assert_eq!(
             v.provenance.steps,
             [format!(
-                "file affine from sform has a NaN or infinite entry (in mm: {a:?}); dropped (it is \
-                 informational only: placement never uses it)"
+                "file affine from sform has a NaN or infinite entry (in mm: {a:?}); {dropped}"
             )]
         );
-        let w = ("Offset and TransformMatrix", None);
-        let v = from_file(p, vec![0.0], [1; 3], [1.0; 3], a, w, vec!["read".into()]);
+        let v = read(a, ("Offset and TransformMatrix", None));
         assert_eq!(
-            v.provenance.steps[1],
-            format!(
+            v.provenance.steps,
+            [format!(
                 "file affine from Offset and TransformMatrix has a NaN or infinite entry \
-                 ({a:?}); dropped (it is informational only: placement never uses it)"
-            )
+                 ({a:?}); {dropped}"
+            )]
         );
     }
 }
