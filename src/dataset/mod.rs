@@ -4,6 +4,7 @@
 //! ([x, y, z]) and PNG previews.
 
 pub mod generate;
+pub mod noise;
 pub mod pickle;
 pub mod store;
 pub mod targets;
