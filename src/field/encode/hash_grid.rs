@@ -96,14 +96,27 @@ impl HashGrid {
                     p[d] = g[d] + 1;
                 }
             }
+            // torch-ngp takes the index modulo the level size. A dense index is already below
+            // it (corners lie in 0..=R, so the index is below (R + 1)^3 <= size), and a hashed
+            // level has size T, a power of two: the modulo is a mask (same result, no division).
             let i = if dense {
-                p[0] as u64 + (r + 1) * (p[1] as u64 + (r + 1) * p[2] as u64)
+                let i = p[0] as u64 + (r + 1) * (p[1] as u64 + (r + 1) * p[2] as u64);
+                if i < size {
+                    i
+                } else {
+                    i % size
+                }
             } else {
-                (p[0].wrapping_mul(PRIMES[0])
+                let h = (p[0].wrapping_mul(PRIMES[0])
                     ^ p[1].wrapping_mul(PRIMES[1])
-                    ^ p[2].wrapping_mul(PRIMES[2])) as u64
+                    ^ p[2].wrapping_mul(PRIMES[2])) as u64;
+                if size.is_power_of_two() {
+                    h & (size - 1)
+                } else {
+                    h % size
+                }
             };
-            idx[c] = (i % size) as usize;
+            idx[c] = i as usize;
         }
         (idx, w)
     }
