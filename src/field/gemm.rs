@@ -9,7 +9,7 @@
 //! for t = 0, 1, ... multiply `A(i, t) B[t][j]` and add (a separate multiply and add, never
 //! fused). The chain does not depend on the tile the element falls in, on the row block, on
 //! the instruction set or on the thread, so every path, tiling and thread count gives the same
-//! bits, and the bits equal those of the plain loops the MLP used before. (On AMD Zen 3 the two
+//! bits, and the bits equal those of the plain loops the MLP used before. (On AMD Zen 3 / 4 the two
 //! floating-point add pipes and two multiply pipes give separate multiplies and adds the same
 //! peak rate as fused multiply-adds, so not fusing costs no throughput there; the peak of
 //! `unispine bench field` is measured with the same unfused operations.)

@@ -2,10 +2,10 @@
 //! (caiyuanhao1998/SAX-NeRF, `src/trainer.py`, `config/*/`) trains them: one trainer, and only
 //! the encoder, the MLP and the sampling differ.
 //!
-//! Stages (one file each, forward and backward): [`encode`] (frequency, hash grid), [`mlp`],
-//! [`render`] (rays, stratified samples, line integral), [`adam`] (PyTorch Adam over a flat
-//! vector), [`train`] (the loop, evaluation, model file). Generic over [`Real`]: f32 to train,
-//! f64 for the gradient checks.
+//! Stages (one file each, forward and backward): [`encode`] (frequency, hash grid), [`mlp`]
+//! (its matrix products in [`gemm`]), [`render`] (rays, stratified samples, line integral),
+//! [`adam`] (PyTorch Adam over a flat vector), [`train`] (the loop, evaluation, model file);
+//! [`bench`] times them. Generic over [`Real`]: f32 to train, f64 for the gradient checks.
 //!
 //! Presets ([`FieldConfig::preset`]); `*-full` follow the upstream configs, the others are
 //! reduced to fit a 2-core CPU and are labelled `(reduced)` in `metrics.json`:

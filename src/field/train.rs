@@ -13,7 +13,9 @@
 //! Work split: blocks of [`RAYS_PER_BLOCK`] rays run in parallel (samples, encoding, MLP
 //! forward and backward, per-block MLP gradient); the blocks' gradients and losses are added in
 //! block order, then the encoder gradient is scattered level by level from the saved
-//! per-sample encoding gradients. Bit-identical for any thread count.
+//! per-sample encoding gradients. Bit-identical for any thread count. The per-sample buffers
+//! (points, encodings, MLP caches, gradients) live in a [`Workspace`] kept by the trainer and
+//! are not reallocated once grown; the batch's ray list and pixel permutation still are.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
