@@ -1,6 +1,7 @@
 //! Command-line front end: one file per subcommand, each with its clap `Args` and `run`.
 
 pub mod bench;
+pub mod bench_field;
 pub mod data;
 pub mod drr;
 pub mod eval;

@@ -2,10 +2,10 @@
 //! (caiyuanhao1998/SAX-NeRF, `src/trainer.py`, `config/*/`) trains them: one trainer, and only
 //! the encoder, the MLP and the sampling differ.
 //!
-//! Stages (one file each, forward and backward): [`encode`] (frequency, hash grid), [`mlp`],
-//! [`render`] (rays, stratified samples, line integral), [`adam`] (PyTorch Adam over a flat
-//! vector), [`train`] (the loop, evaluation, model file). Generic over [`Real`]: f32 to train,
-//! f64 for the gradient checks.
+//! Stages (one file each, forward and backward): [`encode`] (frequency, hash grid), [`mlp`]
+//! (its matrix products in [`gemm`]), [`render`] (rays, stratified samples, line integral),
+//! [`adam`] (PyTorch Adam over a flat vector), [`train`] (the loop, evaluation, model file);
+//! [`bench`] times them. Generic over [`Real`]: f32 to train, f64 for the gradient checks.
 //!
 //! Presets ([`FieldConfig::preset`]); `*-full` follow the upstream configs, the others are
 //! reduced to fit a 2-core CPU and are labelled `(reduced)` in `metrics.json`:
@@ -22,7 +22,9 @@
 //! `--iters N` replaces the iteration count and scales the StepLR step in proportion.
 
 pub mod adam;
+pub mod bench;
 pub mod encode;
+pub mod gemm;
 pub mod mlp;
 pub mod model;
 pub mod render;
@@ -334,13 +336,18 @@ impl<R: Real> Field<R> {
 
     /// Encode a block of points (`n x out_dim`).
     pub fn encode(&self, pts: &[[R; 3]]) -> Vec<R> {
+        let mut out = vec![R::zero(); pts.len() * self.encoder.out_dim()];
+        self.encode_into(pts, &mut out);
+        out
+    }
+
+    /// [`Field::encode`] into `out` (`n x out_dim`).
+    pub fn encode_into(&self, pts: &[[R; 3]], out: &mut [R]) {
         let e = self.encoder.out_dim();
-        let mut out = vec![R::zero(); pts.len() * e];
         let ep = &self.params[..self.n_encoder_params()];
         for (p, o) in pts.iter().zip(out.chunks_mut(e)) {
             self.encoder.encode(ep, *p, o);
         }
-        out
     }
 
     /// Attenuation at a block of points.
