@@ -174,6 +174,9 @@ pub struct TrainConfig {
     pub preview_views: usize,
     /// Write a checkpoint every this many iterations (0 = only at the end / on stop).
     pub checkpoint_every: usize,
+    /// Compaction after the main schedule (not in the paper; off by default).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compact: Option<super::compact::CompactConfig>,
 }
 
 fn one() -> f64 {
@@ -263,6 +266,7 @@ impl TrainConfig {
             train_views: Some(50),
             preview_views: 4,
             checkpoint_every: 1000,
+            compact: None,
         }
     }
 
@@ -288,15 +292,30 @@ impl TrainConfig {
         self.checkpoint_every = s(self.checkpoint_every);
     }
 
-    /// Evaluation iterations within the run, sorted, with the last iteration included.
+    /// Iterations of the whole run: `iterations`, plus the fine-tuning after a compaction.
+    pub fn total_iterations(&self) -> usize {
+        self.iterations + self.compact.as_ref().map_or(0, |c| c.finetune)
+    }
+
+    /// The iteration whose update a compaction replaces (`None`: no compaction).
+    pub fn compact_at(&self) -> Option<usize> {
+        self.compact
+            .as_ref()
+            .map(|c| c.at_iteration(self.iterations))
+    }
+
+    /// Evaluation iterations within the run, sorted, with the last iteration (and the
+    /// compaction iteration) included.
     pub fn eval_points(&self) -> Vec<usize> {
+        let total = self.total_iterations();
         let mut v: Vec<usize> = self
             .eval_iterations
             .iter()
             .cloned()
-            .filter(|&x| x >= 1 && x <= self.iterations)
+            .filter(|&x| x >= 1 && x <= total)
             .collect();
-        v.push(self.iterations);
+        v.extend(self.compact_at());
+        v.push(total);
         v.sort_unstable();
         v.dedup();
         v
@@ -305,8 +324,9 @@ impl TrainConfig {
     /// Whether the test views are evaluated after (1-based) iteration `it`: the same set as
     /// [`TrainConfig::eval_points`], without building it.
     pub fn is_eval_point(&self, it: usize) -> bool {
-        (1..=self.iterations).contains(&it)
-            && (it == self.iterations || self.eval_iterations.contains(&it))
+        let total = self.total_iterations();
+        (1..=total).contains(&it)
+            && (it == total || self.compact_at() == Some(it) || self.eval_iterations.contains(&it))
     }
 
     /// Number of active features at (1-based) iteration `it`: 1, then one more SH band at every
@@ -504,6 +524,9 @@ impl TrainConfig {
         for (field, v, lo, lo_open, hi, hi_open) in checks {
             check_range(field, v, (lo, lo_open), (hi, hi_open))?;
         }
+        if let Some(c) = &self.compact {
+            c.validate(self.iterations)?;
+        }
         Ok(())
     }
 
@@ -599,6 +622,19 @@ pub struct TrainOverrides {
     /// points) from 20000 iterations to --iters.
     #[arg(long)]
     pub compress_schedule: bool,
+    /// Compaction: keep this fraction (0, 1] of the Gaussians, ranked by their alpha*T over the
+    /// training views.
+    #[arg(long)]
+    pub compact_keep: Option<f64>,
+    /// Compaction: keep at most this many Gaussians (a budget >= 1).
+    #[arg(long)]
+    pub compact_to: Option<usize>,
+    /// Compaction: replace the update of this iteration (default: the last of --iters).
+    #[arg(long)]
+    pub compact_at: Option<usize>,
+    /// Compaction: fine-tune this many iterations after --iters, without densification.
+    #[arg(long)]
+    pub compact_finetune: Option<usize>,
 }
 
 impl TrainOverrides {
@@ -659,8 +695,48 @@ impl TrainOverrides {
         }
         set!(c.checkpoint_every, self.checkpoint_every);
         set!(c.preview_views, self.preview_views);
+        self.apply_compact(&mut c)?;
         c.validate()?;
         Ok(c)
+    }
+}
+
+impl TrainOverrides {
+    /// The `--compact-*` flags: keep / to replace the config's pair, at / finetune need one of
+    /// them (here or in the config).
+    fn apply_compact(&self, c: &mut TrainConfig) -> Result<()> {
+        let size = self.compact_keep.is_some() || self.compact_to.is_some();
+        if !size && c.compact.is_none() {
+            for (flag, given) in [
+                ("--compact-at", self.compact_at.is_some()),
+                ("--compact-finetune", self.compact_finetune.is_some()),
+            ] {
+                if given {
+                    return Err(Error::invalid(
+                        flag,
+                        "needs a compaction: give --compact-keep FRACTION or --compact-to N",
+                    ));
+                }
+            }
+            return Ok(());
+        }
+        let k = c.compact.get_or_insert(super::compact::CompactConfig {
+            keep: None,
+            to: None,
+            at: None,
+            finetune: 0,
+        });
+        if size {
+            k.keep = self.compact_keep;
+            k.to = self.compact_to;
+        }
+        if self.compact_at.is_some() {
+            k.at = self.compact_at;
+        }
+        if let Some(f) = self.compact_finetune {
+            k.finetune = f;
+        }
+        Ok(())
     }
 }
 
