@@ -145,18 +145,18 @@ fn compacting(iters: usize, to: usize, at: Option<usize>, finetune: usize) -> tr
 #[test]
 fn compaction_keeps_exactly_the_highest_scores_with_their_adam_moments() {
     let ds = tiny::dataset();
-    let cfg = compacting(30, 150, Some(25), 5);
+    let cfg = compacting(30, 150, Some(15), 5);
     let mut tr = Trainer::new(cfg, &ds).unwrap();
-    for _ in 0..24 {
+    for _ in 0..14 {
         tr.step().unwrap();
     }
     let before = tr.state.clone();
     let n = before.len();
     assert!(n > 150, "the tiny run has {n} Gaussians before compacting");
     let cams: Vec<Camera> = (0..tr.targets.len()).map(|k| ds.train_camera(k)).collect();
-    let score = compact::importance(&before.params, &cams, &tr.settings(25)).unwrap();
+    let score = compact::importance(&before.params, &cams, &tr.settings(15)).unwrap();
     let info = tr.step().unwrap();
-    assert_eq!(info.iteration, 25);
+    assert_eq!(info.iteration, 15);
     assert_eq!(tr.state.len(), 150);
     assert_eq!(info.eval.as_ref().unwrap().n_gaussians, 150);
     // Which Gaussians survive: found by matching parameters (the prune keeps the order).
@@ -190,9 +190,9 @@ fn compaction_keeps_exactly_the_highest_scores_with_their_adam_moments() {
     // Adam step counts are untouched by the prune (and no update at the compaction).
     assert_eq!(tr.state.adam.steps, before.adam.steps);
     let c = tr.compaction.clone().unwrap();
-    assert_eq!((c.iteration, c.n_before, c.n_after), (25, n, 150));
-    // The rest of the schedule and the fine-tuning (iterations 26..=35): no densification
-    // (the tiny schedule densifies every 10 iterations until 20 otherwise), the count stays.
+    assert_eq!((c.iteration, c.n_before, c.n_after), (15, n, 150));
+    // The rest of the schedule and the fine-tuning (iterations 16..=35): no densification
+    // (the tiny schedule would densify at iteration 20), the count stays.
     while tr.iteration < 35 {
         let s = tr.step().unwrap();
         assert!(s.densified.is_none());
