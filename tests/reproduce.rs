@@ -228,10 +228,12 @@ fn bad_plans_are_errors_naming_the_line_before_anything_runs() {
 fn a_stopped_cell_resumes_from_its_checkpoint_with_the_same_bits() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let plan = tiny_plan(30, "").replace("seeds = [0, 1]", "seeds = [0]").replace(
-        "methods = [\"xgaussian\", \"unispine\"]",
-        "methods = [\"unispine\"]",
-    );
+    let plan = tiny_plan(30, "")
+        .replace("seeds = [0, 1]", "seeds = [0]")
+        .replace(
+            "methods = [\"xgaussian\", \"unispine\"]",
+            "methods = [\"unispine\"]",
+        );
     std::fs::write(dir.join("plan.toml"), plan).unwrap();
     let o = reproduce(&["plan.toml", "--out", "a"], dir);
     assert!(o.status.success(), "{}", text(&o));

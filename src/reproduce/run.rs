@@ -370,7 +370,17 @@ fn run_cell(
         }
     }
     if let Some(before) = resume_from {
-        return train_cell(cell, &dir, &args, key, ds, opts, threads, machine, Some(before));
+        return train_cell(
+            cell,
+            &dir,
+            &args,
+            key,
+            ds,
+            opts,
+            threads,
+            machine,
+            Some(before),
+        );
     }
     if dir.exists() {
         if let Err(e) = std::fs::remove_dir_all(&dir) {
