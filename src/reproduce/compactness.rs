@@ -123,7 +123,7 @@ pub fn section(rows: &[Row]) -> String {
         let Some((un, up)) = unb else { continue };
         let _ = writeln!(
             s,
-            "### {d} / {m}\n\n| {flag} | Gaussians | test PSNR (dB) | drop, mean (worst) | fps | \
+            "**{d} / {m}**\n\n| {flag} | Gaussians | test PSNR (dB) | drop, mean (worst) | fps | \
              seeds | within {WITHIN_DB} dB |\n|---|---:|---:|---:|---:|---:|---|"
         );
         let _ = writeln!(s, "| unbounded | {un:.0} | {up:.3} | | | | |");
@@ -165,4 +165,79 @@ pub fn section(rows: &[Row]) -> String {
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(value: &str, seed: u64, n: usize, psnr: f64, unb: (usize, f64)) -> Row {
+        Row {
+            index: 0,
+            dataset: "d".into(),
+            paper_dataset: None,
+            method: "m".into(),
+            base: "m".into(),
+            sweep_flag: Some("compact-keep".into()),
+            sweep_value: Some(value.into()),
+            seed,
+            iters: 10,
+            status: "done".into(),
+            completed: true,
+            psnr: Some(psnr),
+            ssim: None,
+            train_time_s: None,
+            fps: Some(100.0 + n as f64),
+            n_gaussians: Some(n),
+            unbounded_n: Some(unb.0),
+            unbounded_psnr: Some(unb.1),
+            peak_memory_mib: None,
+            wall_s: None,
+            error: None,
+            curve: vec![],
+            run_dir: String::new(),
+            version: None,
+            git_commit: None,
+            dataset_checksum: None,
+            config_hash: None,
+            cpu_model: None,
+            cores: None,
+            simd: None,
+            threads: None,
+        }
+    }
+
+    #[test]
+    fn the_smallest_rung_whose_mean_paired_drop_is_within_the_tolerance() {
+        // Unbounded: seed 0 1000 Gaussians at 30.0 dB, seed 1 1200 at 31.0 dB.
+        let (u0, u1) = ((1000, 30.0), (1200, 31.0));
+        let rows = vec![
+            // 0.1: drops -0.30 and -0.02, mean -0.16: not within.
+            row("0.1", 0, 100, 29.70, u0),
+            row("0.1", 1, 120, 30.98, u1),
+            // 0.3: drops -0.15 and -0.03, mean -0.09: within (one seed alone is not).
+            row("0.3", 0, 300, 29.85, u0),
+            row("0.3", 1, 360, 30.97, u1),
+            // 0.6: drops +0.1, 0: within, but larger.
+            row("0.6", 0, 600, 30.10, u0),
+            row("0.6", 1, 720, 31.00, u1),
+        ];
+        let s = section(&rows);
+        assert!(s.contains("| unbounded | 1100 | 30.500 |"), "{s}");
+        assert!(
+            s.contains("Smallest within 0.1 dB: compact-keep 0.3: 330 Gaussians (30 % of the unbounded 1100)"),
+            "{s}"
+        );
+        assert!(s.contains("| 0.1 | 110 | 30.340 | -0.160 (-0.300) | 210.0 | 2 | no |"), "{s}");
+        assert_eq!(unbounded(&rows), vec![("d".into(), "m".into(), 1100.0, 30.5)]);
+        // No compacting cell: no section.
+        let plain: Vec<Row> = rows
+            .iter()
+            .map(|r| Row {
+                unbounded_psnr: None,
+                ..r.clone()
+            })
+            .collect();
+        assert_eq!(section(&plain), "");
+    }
 }

@@ -357,7 +357,7 @@ impl<'a> Trainer<'a> {
         // saved (upstream saves its model before that iteration's densification too).
         if compact_at == Some(it) {
             // The compaction replaces this iteration's update: the model pruned is the one
-            // just evaluated (the model a run of `it` iterations saves). Its evaluation goes to
+            // just evaluated (at the default iteration, the model a plain run saves). Its evaluation goes to
             // the compaction record; the pruned model's is this iteration's evaluation.
             let before = eval
                 .take()
