@@ -228,8 +228,14 @@ mod tests {
             s.contains("Smallest within 0.1 dB: compact-keep 0.3: 330 Gaussians (30 % of the unbounded 1100)"),
             "{s}"
         );
-        assert!(s.contains("| 0.1 | 110 | 30.340 | -0.160 (-0.300) | 210.0 | 2 | no |"), "{s}");
-        assert_eq!(unbounded(&rows), vec![("d".into(), "m".into(), 1100.0, 30.5)]);
+        assert!(
+            s.contains("| 0.1 | 110 | 30.340 | -0.160 (-0.300) | 210.0 | 2 | no |"),
+            "{s}"
+        );
+        assert_eq!(
+            unbounded(&rows),
+            vec![("d".into(), "m".into(), 1100.0, 30.5)]
+        );
         // No compacting cell: no section.
         let plain: Vec<Row> = rows
             .iter()
