@@ -271,6 +271,7 @@ pub fn run_fdk(ds: &Dataset) -> Result<(Outcome, Volume<f32>)> {
         extent: 0.0,
         render: Default::default(),
         threads: rayon::current_num_threads(),
+        compaction: None,
         model_bytes: Some(params * 4),
     };
     let config = serde_json::json!({
@@ -485,6 +486,7 @@ pub fn run_field(
         extent: 0.0,
         render: Default::default(),
         threads: rayon::current_num_threads(),
+        compaction: None,
         model_bytes: Some(params * 4),
     };
     let mut config = serde_json::to_value(&cfg).expect("config serialises");

@@ -199,7 +199,11 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
             } => {
                 let what = match outcome {
                     Outcome::Kept => "finished earlier, kept".to_string(),
-                    Outcome::Done { wall_s } => format!("done in {}", fmt_s(*wall_s)),
+                    Outcome::Done { wall_s, resumed } => format!(
+                        "{} in {}",
+                        if *resumed { "resumed, done" } else { "done" },
+                        fmt_s(*wall_s)
+                    ),
                     Outcome::Failed { error } => format!("FAILED: {error}"),
                 };
                 let left = eta_s

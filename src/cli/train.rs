@@ -111,7 +111,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             "training"
         },
         cfg.method.name(),
-        cfg.iterations,
+        cfg.total_iterations(),
         out.display()
     );
     let mut bar: Option<Progress> = None;
@@ -205,6 +205,18 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         m.train_time_s,
         m.render_fps.unwrap_or(f64::NAN)
     );
+    if let Some(c) = &m.compaction {
+        println!(
+            "compaction at iteration {}: {} -> {} Gaussians, test PSNR {:.3} dB before, {:.3} dB \
+             after pruning, {:.3} dB after fine-tuning",
+            c.iteration,
+            c.n_before,
+            c.n_after,
+            c.psnr_before,
+            c.psnr_pruned,
+            m.test_psnr.unwrap_or(f64::NAN)
+        );
+    }
     println!("outputs: {}", out.display());
     Ok(())
 }
