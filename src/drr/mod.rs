@@ -65,6 +65,23 @@ pub fn project_views<R: Real>(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<Image2d<R>>> {
     let p = Projector::new(vol, geo, method)?;
+    let bytes = angles.len() as u64
+        * geo.n_detector[0] as u64
+        * geo.n_detector[1] as u64
+        * std::mem::size_of::<R>() as u64;
+    if bytes > crate::dataset::generate::MAX_PROJECTION_BYTES {
+        return Err(Error::invalid(
+            "angles",
+            format!(
+                "{} views of {} x {} pixels is {bytes} bytes of projections, above the allowed \
+                 {} (8 GiB): use fewer angles or a smaller nDetector",
+                angles.len(),
+                geo.n_detector[0],
+                geo.n_detector[1],
+                crate::dataset::generate::MAX_PROJECTION_BYTES
+            ),
+        ));
+    }
     let mut out = Vec::with_capacity(angles.len());
     for (k, &a) in angles.iter().enumerate() {
         out.push(p.view(a)?);
