@@ -428,21 +428,9 @@ pub fn check_view(cam: &Camera, box_: ([f64; 3], [f64; 3])) -> Result<()> {
     }
     for corner in 0..8 {
         let p = [
-            if corner & 1 == 0 {
-                lo[0]
-            } else {
-                hi[0]
-            },
-            if corner & 2 == 0 {
-                lo[1]
-            } else {
-                hi[1]
-            },
-            if corner & 4 == 0 {
-                lo[2]
-            } else {
-                hi[2]
-            },
+            if corner & 1 == 0 { lo[0] } else { hi[0] },
+            if corner & 2 == 0 { lo[1] } else { hi[1] },
+            if corner & 4 == 0 { lo[2] } else { hi[2] },
         ];
         let z = cam.world_to_cam(p)[2];
         if z > cam.dsd {

@@ -141,7 +141,9 @@ fn a_signal_stops_a_field_run_with_its_model_and_metrics() {
     );
     for (sig, code, name) in [(libc::SIGTERM, 143, "term"), (libc::SIGINT, 130, "int")] {
         let mut child = Command::new(env!("CARGO_BIN_EXE_unispine"))
-            .args(["train", "--data", "ph", "--method", "naf", "--iters", "1000000"])
+            .args([
+                "train", "--data", "ph", "--method", "naf", "--iters", "1000000",
+            ])
             .args(["--out", name])
             .current_dir(d)
             .stdout(std::process::Stdio::null())

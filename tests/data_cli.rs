@@ -647,7 +647,10 @@ fn a_two_d_volume_projects_on_even_and_odd_detectors() {
         for p in ds.train.projections.iter().chain(&ds.test.projections) {
             for r in 0..n {
                 let row = &p.data[r * n..(r + 1) * n];
-                assert!(row.iter().any(|&v| v > 0.0), "detector {n}: row {r} is empty");
+                assert!(
+                    row.iter().any(|&v| v > 0.0),
+                    "detector {n}: row {r} is empty"
+                );
             }
         }
     }

@@ -424,7 +424,14 @@ fn unbounded_numeric_flags_are_range_checked() {
             "[1, 4096]",
         ),
         (
-            &["bench", "render", "--sizes", "64", "--gaussians", "10000000000"][..],
+            &[
+                "bench",
+                "render",
+                "--sizes",
+                "64",
+                "--gaussians",
+                "10000000000",
+            ][..],
             "--gaussians",
             "[1, 2000000]",
         ),
@@ -443,7 +450,11 @@ fn unbounded_numeric_flags_are_range_checked() {
         if args[0] == "reproduce" {
             a.extend(["--out", out.as_str()]);
         }
-        a.extend(["--baselines", "false"].iter().filter(|_| args[0] == "bench"));
+        a.extend(
+            ["--baselines", "false"]
+                .iter()
+                .filter(|_| args[0] == "bench"),
+        );
         assert_error(&a, flag, &[range]);
     }
     // drr: 9 views of 16384 x 16384 f32 pixels (9.7 GB).

@@ -334,11 +334,17 @@ fn resumed_progress_counts_from_the_resumed_iteration() {
     let run = root.path().join("r");
     ok(bin()
         .current_dir(root.path())
-        .args(["train", "--data", "data", "--config", "cfg.json", "--out", "r"])
+        .args([
+            "train", "--data", "data", "--config", "cfg.json", "--out", "r",
+        ])
         .args(["--stop-after", "9"])
         .output()
         .unwrap());
-    let o = bin().args(["train", "--resume"]).arg(&run).output().unwrap();
+    let o = bin()
+        .args(["train", "--resume"])
+        .arg(&run)
+        .output()
+        .unwrap();
     let err = String::from_utf8_lossy(&o.stderr).to_string();
     assert!(o.status.success(), "{err}");
     assert!(err.contains("train: 24/24 "), "{err}");

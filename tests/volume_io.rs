@@ -1301,7 +1301,11 @@ fn nifti_every_spatial_unit_code_scales_voxels_and_affine_to_mm() {
         let a = v.provenance.file_affine.unwrap();
         for r in 0..3 {
             for c in 0..4 {
-                assert_eq!(a[r][c], h.srow[r][c] as f64 * mm, "xyzt_units {code} [{r}][{c}]");
+                assert_eq!(
+                    a[r][c],
+                    h.srow[r][c] as f64 * mm,
+                    "xyzt_units {code} [{r}][{c}]"
+                );
             }
         }
         assert_ramp_i16(&v);

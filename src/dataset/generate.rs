@@ -183,7 +183,10 @@ impl GenerateOptions {
     /// Error naming the option when it cannot give a dataset (each bound with its allowed
     /// range).
     pub fn validate(&self) -> Result<()> {
-        for (name, n) in [("train_views", self.train_views), ("test_views", self.test_views)] {
+        for (name, n) in [
+            ("train_views", self.train_views),
+            ("test_views", self.test_views),
+        ] {
             if n > MAX_VIEWS {
                 return Err(Error::invalid(
                     name,
