@@ -376,8 +376,14 @@ pub fn run(
         Baseline::Field(name) => {
             let mut cfg = FieldConfig::preset(name, ds.train.angles.len())?;
             if let Some(n) = iters {
-                if n == 0 {
-                    return Err(Error::invalid("--iters", "must be > 0"));
+                if n == 0 || n > crate::field::MAX_ITERATIONS {
+                    return Err(Error::invalid(
+                        "--iters",
+                        format!(
+                            "{n} is outside the allowed range [1, {}]",
+                            crate::field::MAX_ITERATIONS
+                        ),
+                    ));
                 }
                 cfg.set_iterations(n);
             }

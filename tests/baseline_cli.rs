@@ -112,3 +112,85 @@ fn bad_method_settings_are_named() {
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("--iters"));
 }
+
+/// SIGTERM / SIGINT during a field baseline run: it stops at the next iteration boundary,
+/// writes the model and a `metrics.json` with `"completed": false` (the log holds every
+/// iteration done) and exits 143 / 130 like the Gaussian trainer. `--resume` of such a run is
+/// a clear error.
+#[test]
+fn a_signal_stops_a_field_run_with_its_model_and_metrics() {
+    use std::io::BufRead;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(
+        &[
+            "data",
+            "phantom",
+            "--size",
+            "32",
+            "--detector",
+            "16",
+            "--train-views",
+            "4",
+            "--test-views",
+            "2",
+            "--out",
+            "ph",
+        ],
+        d,
+    );
+    for (sig, code, name) in [(libc::SIGTERM, 143, "term"), (libc::SIGINT, 130, "int")] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_unispine"))
+            .args([
+                "train", "--data", "ph", "--method", "naf", "--iters", "1000000",
+            ])
+            .args(["--out", name])
+            .current_dir(d)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // The handler is installed before the `running` line; the reader keeps draining
+        // stderr so that the child never blocks on it.
+        let (tx, rx) = std::sync::mpsc::channel();
+        let err = child.stderr.take().unwrap();
+        let reader = std::thread::spawn(move || {
+            let mut all = String::new();
+            for line in std::io::BufReader::new(err).lines() {
+                let line = line.unwrap();
+                if line.starts_with("running") {
+                    tx.send(()).ok();
+                }
+                all += &line;
+                all.push('\n');
+            }
+            all
+        });
+        rx.recv_timeout(std::time::Duration::from_secs(120))
+            .expect("the field run did not start");
+        std::thread::sleep(std::time::Duration::from_millis(700));
+        unsafe {
+            libc::kill(child.id() as libc::pid_t, sig);
+        }
+        let status = child.wait().unwrap();
+        let stderr = reader.join().unwrap();
+        assert_eq!(status.code(), Some(code), "{stderr}");
+        let run = d.join(name);
+        let m: Metrics =
+            serde_json::from_str(&std::fs::read_to_string(run.join("metrics.json")).unwrap())
+                .unwrap();
+        assert!(!m.completed);
+        assert!(m.iterations < 1_000_000);
+        assert_eq!(m.test_psnr, None);
+        assert!(run.join("model.npz").is_file() && run.join("config.json").is_file());
+        let log = std::fs::read_to_string(run.join("log.csv")).unwrap();
+        assert_eq!(log.lines().count(), m.iterations + 1, "{log}");
+        let o = unispine(&["train", "--resume", name], d);
+        assert_eq!(o.status.code(), Some(1));
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            e.contains("--resume") && e.contains("`naf`") && e.contains("cannot be resumed"),
+            "{e}"
+        );
+    }
+}

@@ -66,12 +66,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
 }
 
 fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
-    if args.gaussians.is_empty() || args.sizes.is_empty() || args.gaussians.contains(&0) {
-        bail!("--gaussians and --sizes need at least one positive value each");
-    }
-    if args.sizes.contains(&0) {
-        bail!("--sizes must be positive");
-    }
+    crate::audit::bench::check_render_cases(&args.gaussians, &args.sizes, args.reps)?;
     println!(
         "render benchmark: CT-like box of {BOX_MM} mm, cone beam, f32, paper RIRF, {} threads, \
          median of {} reps",

@@ -69,9 +69,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
             BUILTIN.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
         );
     };
-    if args.jobs == 0 {
-        anyhow::bail!("invalid `--jobs`: must be >= 1");
-    }
+    crate::par::check_workers("--jobs", args.jobs)?;
     let schema = TrainSchema::of_train();
     let plan = Plan::load(plan_arg, &schema)?;
     let out = args

@@ -79,6 +79,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let (cfg, ds, out) = match &args.resume {
         Some(run) => {
             let rd = RunDir::open(run)?;
+            rd.check_resumable()?;
             let cfg: train::TrainConfig = rd.read_config()?;
             let data = match (&args.data, rd.dataset_path()?) {
                 (Some(d), _) => d.clone(),
@@ -117,33 +118,34 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let mut bar: Option<Progress> = None;
     let mut on_event = |e: &Event| match e {
         Event::Started {
-            total,
             n_gaussians,
             train_views,
             test_views,
             extent,
+            ..
         } => {
             eprintln!(
                 "{n_gaussians} initial Gaussians, {train_views} training / {test_views} test views, \
                  scene extent {extent:.1} mm"
             );
-            bar = Some(Progress::new("train", *total as u64));
         }
         Event::Progress {
+            iteration,
+            total,
             loss,
             psnr,
             n_gaussians,
             its_per_sec,
-            ..
         } => {
-            if let Some(b) = bar.as_mut() {
-                b.inc(
-                    1,
-                    &format!(
-                        "loss {loss:.4} psnr {psnr:.2} dB N {n_gaussians} {its_per_sec:.1} it/s"
-                    ),
-                );
-            }
+            // Created at the first iteration of this session, so that a resumed run counts
+            // from the iteration it resumed at.
+            let b = bar.get_or_insert_with(|| {
+                Progress::starting_at("train", *total as u64, (*iteration - 1) as u64)
+            });
+            b.inc(
+                1,
+                &format!("loss {loss:.4} psnr {psnr:.2} dB N {n_gaussians} {its_per_sec:.1} it/s"),
+            );
         }
         Event::Eval {
             iteration,
@@ -259,7 +261,8 @@ impl clap::builder::TypedValueParser for MethodParser {
 }
 
 /// `unispine train --method BASELINE`: the baseline's own trainer, the same run folder
-/// (no resume; Ctrl-C stops a field run without evaluation).
+/// (no resume; Ctrl-C / SIGTERM stop a field run after the current iteration without
+/// evaluation and exit 130 / 143).
 fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
     let Some(data) = args.data.as_ref() else {
         bail!("invalid `--data`: a baseline needs a dataset folder");
@@ -271,7 +274,13 @@ fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
         bail!("invalid `--out`: a baseline needs a run folder");
     };
     let ds = crate::dataset::store::load(data)?;
-    let stop = std::sync::atomic::AtomicBool::new(false);
+    // A field run stops at the next iteration boundary on SIGINT / SIGTERM and writes what it
+    // has (model, `metrics.json` with `"completed": false`); FDK is one pass and keeps the
+    // default signal behaviour.
+    let field = matches!(b, Baseline::Field(_));
+    if field {
+        signals::install()?;
+    }
     eprintln!(
         "running `{}` on {} -> {}",
         b.name(),
@@ -291,11 +300,23 @@ fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
             b.inc(1, &format!("loss {loss:.3e} {its_per_sec:.1} it/s"));
         }
     };
-    let m = crate::baseline::run(b, &ds, Some(out), args.iters, &stop, &mut on_event);
+    let m = crate::baseline::run(b, &ds, Some(out), args.iters, &signals::STOP, &mut on_event);
     if let Some(b) = bar.take() {
         b.finish("");
     }
     let m = m?;
+    if !m.completed {
+        println!(
+            "stopped at iteration {}; model and metrics.json written to {} (baseline runs \
+             cannot be resumed)",
+            m.iterations,
+            out.display()
+        );
+        if let Some(code) = signals::exit_code() {
+            std::process::exit(code);
+        }
+        return Ok(());
+    }
     println!(
         "{}: test PSNR {:.3} dB, SSIM {:.4}, train time {:.2} s, render {:.2} fps",
         m.method,

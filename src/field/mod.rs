@@ -39,6 +39,10 @@ use crate::real::Real;
 use encode::{Encoder, Frequency, HashGrid};
 use mlp::{Mlp, OutAct};
 
+/// Most iterations of a field run (over 100 x the longest upstream schedule, `intratomo-full`
+/// and `nerf-full`: 3000 epochs x 50 views).
+pub const MAX_ITERATIONS: usize = 20_000_000;
+
 /// Encoder settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
@@ -217,6 +221,15 @@ impl FieldConfig {
         pos("n_rays", self.n_rays)?;
         pos("n_samples", self.n_samples)?;
         pos("iterations", self.iterations)?;
+        if self.iterations > MAX_ITERATIONS {
+            return Err(Error::invalid(
+                "iterations",
+                format!(
+                    "{} is outside the allowed range [1, {MAX_ITERATIONS}]",
+                    self.iterations
+                ),
+            ));
+        }
         pos("lr_step", self.lr_step)?;
         pos("eval_stride", self.eval_stride)?;
         if !(self.lr.is_finite() && self.lr > 0.0) {

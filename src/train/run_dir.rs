@@ -417,6 +417,28 @@ impl RunDir {
         self.read_json(CONFIG, "config")
     }
 
+    /// An error when the folder holds a baseline run (`unispine train --method fdk | naf | ...`,
+    /// recognised by its `config.json`): only Gaussian runs have a checkpoint to resume from.
+    pub fn check_resumable(&self) -> Result<()> {
+        let v: serde_json::Value = self.read_json(CONFIG, "config")?;
+        let baseline = match (v.get("preset"), v.get("method")) {
+            (Some(p), _) => p.as_str().map(str::to_string),
+            (None, Some(m)) if m == "fdk" => Some("fdk".to_string()),
+            _ => None,
+        };
+        match baseline {
+            Some(name) => Err(Error::invalid(
+                "--resume",
+                format!(
+                    "{} holds a `{name}` baseline run: baseline runs cannot be resumed (train \
+                     it again with `unispine train --method {name}`)",
+                    self.root.display()
+                ),
+            )),
+            None => Ok(()),
+        }
+    }
+
     /// The dataset folder recorded in `config.json` (`data`): absolute as written by `train`;
     /// a relative path (older runs) is taken relative to the run folder, else to the current
     /// folder. `None` when the config names none.

@@ -98,6 +98,7 @@ pub fn resume(
     on_event: &mut dyn FnMut(&Event),
 ) -> Result<Metrics> {
     let rd = RunDir::open(dir)?;
+    rd.check_resumable()?;
     let cfg: TrainConfig = rd.read_config()?;
     let c = rd.read_checkpoint()?;
     let mut tr = Trainer::new(cfg, ds)?;
