@@ -34,8 +34,9 @@ pub enum Command {
     Render(render::RenderArgs),
     /// Check every analytic gradient against central finite differences (f64) and print a table.
     Gradcheck(gradcheck::GradcheckArgs),
-    /// Train a model (methods: unispine, xgaussian, 3dgs, spwm-only).
-    Train(train::TrainArgs),
+    /// Train a model (methods: unispine, xgaussian, 3dgs, spwm-only, and the baselines fdk,
+    /// naf, intratomo, tensorf, nerf[-full]).
+    Train(Box<train::TrainArgs>),
     /// Re-evaluate a saved run on its test views.
     Eval(eval::EvalArgs),
     /// Compare finished runs: one markdown table row per run folder (from its metrics.json).
@@ -53,7 +54,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Drr(a) => drr::run(a),
         Command::Render(a) => render::run(a),
         Command::Gradcheck(a) => gradcheck::run(a),
-        Command::Train(a) => train::run(a),
+        Command::Train(a) => train::run(*a),
         Command::Eval(a) => eval::run(a),
         Command::Report(a) => report::run(a),
         Command::Bench(a) => bench::run(a),

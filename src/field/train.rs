@@ -85,9 +85,7 @@ pub fn loss_and_grad<R: Real>(
                 let r = acc - targets[bi * RAYS_PER_BLOCK + j];
                 loss += r.f64() * r.f64();
                 let g_acc = R::c(2.0) * r / b;
-                for i in s {
-                    g_mu[i] = g_acc * delta[i];
-                }
+                render::line_integral_vjp(g_acc, &delta[s.clone()], &mut g_mu[s]);
             }
             let mut g_mlp = vec![R::zero(); nm];
             let mut g_x = if want_gx {
@@ -126,7 +124,9 @@ pub fn loss_and_grad<R: Real>(
             pts.extend(bl.pts);
             gx.extend(bl.g_x);
         }
-        field.encoder.backward(&pts, &gx, ed, 0, &mut grad[..ne]);
+        field
+            .encoder
+            .backward(&field.params[..ne], &pts, &gx, ed, 0, &mut grad[..ne]);
     }
     (loss / rays.len() as f64, grad)
 }
