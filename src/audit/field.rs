@@ -340,8 +340,14 @@ pub fn loss_encoders() -> Vec<(&'static str, &'static str, EncoderConfig)> {
 }
 
 /// A small f64 field with encoder `enc` (hidden 8, 4 layers, skip 2, 6 samples per ray) and
-/// encoder parameters U(-0.15, 0.15) so that the encoder matters.
+/// encoder parameters U(-0.15, 0.15) (U(-0.6, 0.6) for the VM, whose features are products of
+/// two reads) so that the encoder matters.
 pub fn small_field(enc: EncoderConfig, act: OutAct, seed: u64) -> (FieldConfig, Field<f64>) {
+    let a = if matches!(enc, EncoderConfig::TensorVm { .. }) {
+        0.6
+    } else {
+        0.15
+    };
     let mut c = FieldConfig::preset("naf", 10).expect("preset");
     c.encoder = enc;
     c.hidden_dim = 8;
@@ -351,7 +357,7 @@ pub fn small_field(enc: EncoderConfig, act: OutAct, seed: u64) -> (FieldConfig, 
     c.last_activation = act;
     let mut f = Field::<f64>::new(&c).expect("valid field");
     let ne = f.n_encoder_params();
-    f.params[..ne].copy_from_slice(&uniform(ne, -0.15, 0.15, seed));
+    f.params[..ne].copy_from_slice(&uniform(ne, -a, a, seed));
     (c, f)
 }
 
