@@ -194,3 +194,83 @@ fn a_signal_stops_a_field_run_with_its_model_and_metrics() {
         );
     }
 }
+
+#[test]
+fn tensorf_trains_and_saves_a_numpy_readable_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(
+        &[
+            "data",
+            "phantom",
+            "--size",
+            "32",
+            "--detector",
+            "8",
+            "--train-views",
+            "2",
+            "--test-views",
+            "1",
+            "--out",
+            "ph",
+        ],
+        d,
+    );
+    for (lines, out) in [(None, "tf"), (Some("corrected"), "tfc")] {
+        let mut args = vec![
+            "train", "--data", "ph", "--method", "tensorf", "--iters", "2", "--out", out,
+        ];
+        if let Some(l) = lines {
+            args.extend(["--vm-lines", l]);
+        }
+        let text = ok(&args, d);
+        assert!(text.contains("tensorf (reduced): test PSNR"), "{text}");
+        let m: Metrics = serde_json::from_str(
+            &std::fs::read_to_string(d.join(out).join("metrics.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(m.method, "tensorf (reduced)");
+        assert_eq!(m.iterations, 2);
+        assert!(m.test_psnr.is_some() && m.render_fps.unwrap() > 0.0);
+        // 3 x 8 x 256^2 + 3 x 8 x 256 + 32 x 24 VM values, then the 4 x 64 MLP (skip 2).
+        let mlp = (32 * 64 + 64) + (64 * 64 + 64) + (96 * 64 + 64) + (64 + 1);
+        assert_eq!(m.model_bytes, Some(4 * (1_579_776 + mlp)));
+        let cfg: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(d.join(out).join("config.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(cfg["encoder"]["lines"], lines.unwrap_or("upstream"));
+        let mut npz = ndarray_npy::NpzReader::new(
+            std::fs::File::open(d.join(out).join("model.npz")).unwrap(),
+        )
+        .unwrap();
+        let meta: ndarray::Array1<i64> = npz.by_name("vm_meta").unwrap();
+        assert_eq!(meta.to_vec(), vec![256, 8, 32, lines.is_some() as i64]);
+        let planes: ndarray::Array4<f32> = npz.by_name("vm_planes").unwrap();
+        assert_eq!(planes.dim(), (3, 8, 256, 256));
+        let basis: ndarray::Array2<f32> = npz.by_name("vm_basis").unwrap();
+        assert_eq!(basis.dim(), (32, 24));
+    }
+    // --vm-lines belongs to the TensoRF presets only.
+    for method in ["naf", "unispine"] {
+        let o = unispine(
+            &[
+                "train",
+                "--data",
+                "ph",
+                "--method",
+                method,
+                "--vm-lines",
+                "corrected",
+                "--out",
+                "x",
+            ],
+            d,
+        );
+        assert_eq!(o.status.code(), Some(1), "{method}");
+        assert!(
+            String::from_utf8_lossy(&o.stderr).contains("--vm-lines"),
+            "{method}"
+        );
+    }
+}

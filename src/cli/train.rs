@@ -23,7 +23,7 @@ pub struct TrainArgs {
     #[arg(long, required_unless_present = "resume")]
     pub data: Option<PathBuf>,
     /// Method: a Gaussian preset (unispine, xgaussian, 3dgs, spwm-only) or a baseline (fdk,
-    /// naf, intratomo, nerf, naf-full, intratomo-full, nerf-full).
+    /// naf, intratomo, tensorf, nerf, naf-full, intratomo-full, tensorf-full, nerf-full).
     #[arg(long, default_value = "unispine", value_parser = MethodParser)]
     pub method: TrainMethod,
     /// Training iterations (paper: 20000).
@@ -38,6 +38,10 @@ pub struct TrainArgs {
     /// Stop (as on a signal, with a checkpoint) once this many iterations are complete.
     #[arg(long, hide = true)]
     pub stop_after: Option<usize>,
+    /// TensoRF's line factor (tensorf, tensorf-full only): `upstream` (default; SAX-NeRF reads
+    /// the plane at (0, w) instead of the line vector) or `corrected` (the line vector).
+    #[arg(long, value_enum)]
+    pub vm_lines: Option<VmLinesArg>,
     /// rayon threads (default: all cores). Results do not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
@@ -72,6 +76,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         TrainMethod::Gaussians(m) => m,
         TrainMethod::Baseline(b) => return run_baseline(b, &args),
     };
+    if args.vm_lines.is_some() {
+        bail!("invalid `--vm-lines`: only for the TensoRF presets (tensorf, tensorf-full)");
+    }
     init_threads(args.threads)?;
     if args.resume.is_some() && method != Method::Unispine {
         bail!("--method cannot be combined with --resume (the run's config.json is used)");
@@ -223,6 +230,13 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `--vm-lines`.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum VmLinesArg {
+    Upstream,
+    Corrected,
+}
+
 /// The `--method` parser over the library's list of methods ([`TrainMethod`]): its error
 /// message for an unknown name, and every preset and baseline as clap's possible values (shown
 /// by `--help`).
@@ -300,7 +314,14 @@ fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
             b.inc(1, &format!("loss {loss:.3e} {its_per_sec:.1} it/s"));
         }
     };
-    let m = crate::baseline::run(b, &ds, Some(out), args.iters, &signals::STOP, &mut on_event);
+    let opts = crate::baseline::BaselineOptions {
+        iters: args.iters,
+        vm_lines: args.vm_lines.map(|l| match l {
+            VmLinesArg::Upstream => crate::field::encode::VmLines::Upstream,
+            VmLinesArg::Corrected => crate::field::encode::VmLines::Corrected,
+        }),
+    };
+    let m = crate::baseline::run(b, &ds, Some(out), opts, &signals::STOP, &mut on_event);
     if let Some(b) = bar.take() {
         b.finish("");
     }

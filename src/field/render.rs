@@ -143,3 +143,11 @@ pub fn line_integral<R: Real>(mu: &[R], delta: &[R]) -> R {
     }
     acc
 }
+
+/// Backward of [`line_integral`]: `g_mu[i] = g_acc delta_i`.
+#[inline]
+pub fn line_integral_vjp<R: Real>(g_acc: R, delta: &[R], g_mu: &mut [R]) {
+    for (g, d) in g_mu.iter_mut().zip(delta) {
+        *g = g_acc * *d;
+    }
+}

@@ -186,9 +186,7 @@ impl<R: Real> Workspace<R> {
                     let res = acc - targets[bi * RAYS_PER_BLOCK + j];
                     l += res.f64() * res.f64();
                     let g_acc = R::c(2.0) * res / b;
-                    for i in r {
-                        s.g_mu[i] = g_acc * s.delta[i];
-                    }
+                    render::line_integral_vjp(g_acc, &s.delta[r.clone()], &mut s.g_mu[r]);
                 }
                 *loss = l;
                 let t_render = clock.lap();
@@ -220,7 +218,7 @@ impl<R: Real> Workspace<R> {
             let t0 = Instant::now();
             field
                 .encoder
-                .backward(&self.pts, &self.g_x, ed, 0, &mut self.grad[..ne]);
+                .backward(&field.params[..ne], &self.pts, &self.g_x, ed, 0, &mut self.grad[..ne]);
             if let Some(tm) = times {
                 tm.lock().unwrap_or_else(|e| e.into_inner()).encode_backward +=
                     t0.elapsed().as_secs_f64();
