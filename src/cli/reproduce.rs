@@ -14,8 +14,8 @@ use crate::reproduce::run::{self, Outcome, RunEvent, RunOptions};
 /// Arguments of `unispine reproduce`.
 #[derive(Debug, clap::Args)]
 pub struct ReproduceArgs {
-    /// A built-in plan (quick, table2, table1, stability, compactness, each with a -full twin)
-    /// or a plan TOML file.
+    /// A built-in plan (quick, table2, table1, stability, compactness, budgets, each with a
+    /// -full twin) or a plan TOML file.
     pub plan: Option<String>,
     /// Output folder (default: reproduce-PLANNAME).
     #[arg(long)]

@@ -216,9 +216,14 @@ impl<R: Real> Workspace<R> {
         }
         if want_gx {
             let t0 = Instant::now();
-            field
-                .encoder
-                .backward(&field.params[..ne], &self.pts, &self.g_x, ed, 0, &mut self.grad[..ne]);
+            field.encoder.backward(
+                &field.params[..ne],
+                &self.pts,
+                &self.g_x,
+                ed,
+                0,
+                &mut self.grad[..ne],
+            );
             if let Some(tm) = times {
                 tm.lock().unwrap_or_else(|e| e.into_inner()).encode_backward +=
                     t0.elapsed().as_secs_f64();
