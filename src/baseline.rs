@@ -30,7 +30,8 @@ use crate::dataset::Dataset;
 use crate::drr::{self, Projector};
 use crate::error::{Error, Result};
 use crate::eval::{self, EvalResult, ViewMetrics};
-use crate::field::{Field, FieldConfig};
+use crate::field::encode::VmLines;
+use crate::field::{EncoderConfig, Field, FieldConfig};
 use crate::image2d::Image2d;
 use crate::train::{EvalPoint, Event, Method, Metrics};
 use crate::volume::Volume;
@@ -271,6 +272,7 @@ pub fn run_fdk(ds: &Dataset) -> Result<(Outcome, Volume<f32>)> {
         extent: 0.0,
         render: Default::default(),
         threads: rayon::current_num_threads(),
+        compaction: None,
         model_bytes: Some(params * 4),
     };
     let config = serde_json::json!({
@@ -347,17 +349,36 @@ pub fn write_run(
 /// Writes a run's model into its folder.
 type ModelWriter = Box<dyn Fn(&Path) -> Result<()>>;
 
-/// Run `baseline` on `ds`, writing the run folder `out` when given. `iters` replaces a field
-/// preset's iteration count (an error for FDK); `stop` ends a field run early (no evaluation);
-/// `on_event` receives [`Event::Progress`] after each field iteration.
+/// Settings of a baseline run beyond its preset.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BaselineOptions {
+    /// Replaces a field preset's iteration count (an error for FDK).
+    pub iters: Option<usize>,
+    /// TensoRF's line factor (`tensorf*` presets only; default the preset's, `upstream`).
+    pub vm_lines: Option<VmLines>,
+}
+
+/// Run `baseline` on `ds`, writing the run folder `out` when given, with `opts`
+/// ([`BaselineOptions`]); `stop` ends a field run early (no evaluation); `on_event` receives
+/// [`Event::Progress`] after each field iteration.
 pub fn run(
     baseline: Baseline,
     ds: &Dataset,
     out: Option<&Path>,
-    iters: Option<usize>,
+    opts: BaselineOptions,
     stop: &AtomicBool,
     on_event: &mut dyn FnMut(&Event),
 ) -> Result<Metrics> {
+    let iters = opts.iters;
+    if opts.vm_lines.is_some() && !baseline.name().starts_with("tensorf") {
+        return Err(Error::invalid(
+            "--vm-lines",
+            format!(
+                "only for the TensoRF presets (tensorf, tensorf-full), not `{}`",
+                baseline.name()
+            ),
+        ));
+    }
     let (o, write_model): (Outcome, ModelWriter) = match baseline {
         Baseline::Fdk => {
             if iters.is_some() {
@@ -375,10 +396,21 @@ pub fn run(
         Baseline::Field(name) => {
             let mut cfg = FieldConfig::preset(name, ds.train.angles.len())?;
             if let Some(n) = iters {
-                if n == 0 {
-                    return Err(Error::invalid("--iters", "must be > 0"));
+                if n == 0 || n > crate::field::MAX_ITERATIONS {
+                    return Err(Error::invalid(
+                        "--iters",
+                        format!(
+                            "{n} is outside the allowed range [1, {}]",
+                            crate::field::MAX_ITERATIONS
+                        ),
+                    ));
                 }
                 cfg.set_iterations(n);
+            }
+            if let (Some(l), EncoderConfig::TensorVm { lines, .. }) =
+                (opts.vm_lines, &mut cfg.encoder)
+            {
+                *lines = l;
             }
             let (o, field) = run_field(cfg, ds, stop, on_event)?;
             (
@@ -485,6 +517,7 @@ pub fn run_field(
         extent: 0.0,
         render: Default::default(),
         threads: rayon::current_num_threads(),
+        compaction: None,
         model_bytes: Some(params * 4),
     };
     let mut config = serde_json::to_value(&cfg).expect("config serialises");

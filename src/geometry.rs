@@ -195,6 +195,24 @@ impl ConeBeam {
         ]
     }
 
+    /// The volume box `(lo, hi)` in world mm: `offOrigin -+ sVoxel / 2` per axis (as
+    /// [`crate::volume::Volume::bounds`] computes it for a volume on this grid).
+    pub fn volume_box(&self) -> ([f64; 3], [f64; 3]) {
+        let s = self.volume_size();
+        let mut lo = [0.0; 3];
+        let mut hi = [0.0; 3];
+        for a in 0..3 {
+            lo[a] = self.off_origin[a] - s[a] / 2.0;
+            hi[a] = self.off_origin[a] + s[a] / 2.0;
+        }
+        (lo, hi)
+    }
+
+    /// [`check_view`] of the camera at `angle` (radians) against this geometry's volume box.
+    pub fn check_view(&self, angle: f64) -> Result<()> {
+        check_view(&self.camera(angle), self.volume_box())
+    }
+
     /// Image width (u, columns) and height (v, rows) in pixels.
     pub fn image_size(&self) -> (usize, usize) {
         (self.n_detector[1], self.n_detector[0])
@@ -376,6 +394,56 @@ pub fn voxel_centre(n: [usize; 3], d: [f64; 3], off: [f64; 3], ijk: [f64; 3]) ->
         p[a] = -(n[a] as f64) * d[a] / 2.0 + (ijk[a] + 0.5) * d[a] + off[a];
     }
     p
+}
+
+/// Per-view geometry checks: the source must lie outside the volume, and the detector plane
+/// must not cut it (both cone beam only).
+///
+/// `box_` is the volume box `(lo, hi)` in world mm ([`ConeBeam::volume_box`]). `unispine drr`
+/// and `unispine render` both call this, so they accept and refuse the same views with the
+/// same message.
+pub fn check_view(cam: &Camera, box_: ([f64; 3], [f64; 3])) -> Result<()> {
+    let (lo, hi) = box_;
+    let angle = cam.angle;
+    if cam.mode != Mode::Cone {
+        return Ok(());
+    }
+    let c = cam.centre;
+    if (0..3).all(|a| c[a] >= lo[a] && c[a] <= hi[a]) {
+        return Err(Error::Geometry(format!(
+            "the source at ({:.3}, {:.3}, {:.3}) mm (view at {:.4} deg) lies inside the volume box \
+             [{:.3}, {:.3}] x [{:.3}, {:.3}] x [{:.3}, {:.3}] mm: increase DSO or move the volume \
+             (offOrigin)",
+            c[0],
+            c[1],
+            c[2],
+            angle.to_degrees(),
+            lo[0],
+            hi[0],
+            lo[1],
+            hi[1],
+            lo[2],
+            hi[2]
+        )));
+    }
+    for corner in 0..8 {
+        let p = [
+            if corner & 1 == 0 { lo[0] } else { hi[0] },
+            if corner & 2 == 0 { lo[1] } else { hi[1] },
+            if corner & 4 == 0 { lo[2] } else { hi[2] },
+        ];
+        let z = cam.world_to_cam(p)[2];
+        if z > cam.dsd {
+            return Err(Error::Geometry(format!(
+                "the volume reaches {:.3} mm from the source along the axis but the detector is at \
+                 DSD = {:.3} mm (view at {:.4} deg): the detector plane cuts the volume",
+                z,
+                cam.dsd,
+                angle.to_degrees()
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Allowed range of `accuracy` (the trilinear step in voxel sizes). Below 0.01 a ray takes

@@ -59,3 +59,20 @@ mod tests {
         assert_eq!(bits[0], bits[1]);
     }
 }
+
+/// Check a count of parallel workers (`--jobs`, `--threads`): the allowed range is
+/// [1, 8 x the available cores]. More only costs memory (stacks, processes) and time: results
+/// never depend on it.
+pub fn check_workers(flag: &str, n: usize) -> crate::Result<()> {
+    let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+    if n == 0 || n > 8 * cores {
+        return Err(crate::Error::invalid(
+            flag,
+            format!(
+                "{n} is outside the allowed range [1, {}] (8 x the {cores} cores)",
+                8 * cores
+            ),
+        ));
+    }
+    Ok(())
+}

@@ -112,3 +112,165 @@ fn bad_method_settings_are_named() {
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("--iters"));
 }
+
+/// SIGTERM / SIGINT during a field baseline run: it stops at the next iteration boundary,
+/// writes the model and a `metrics.json` with `"completed": false` (the log holds every
+/// iteration done) and exits 143 / 130 like the Gaussian trainer. `--resume` of such a run is
+/// a clear error.
+#[test]
+fn a_signal_stops_a_field_run_with_its_model_and_metrics() {
+    use std::io::BufRead;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(
+        &[
+            "data",
+            "phantom",
+            "--size",
+            "32",
+            "--detector",
+            "16",
+            "--train-views",
+            "4",
+            "--test-views",
+            "2",
+            "--out",
+            "ph",
+        ],
+        d,
+    );
+    for (sig, code, name) in [(libc::SIGTERM, 143, "term"), (libc::SIGINT, 130, "int")] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_unispine"))
+            .args([
+                "train", "--data", "ph", "--method", "naf", "--iters", "1000000",
+            ])
+            .args(["--out", name])
+            .current_dir(d)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // The handler is installed before the `running` line; the reader keeps draining
+        // stderr so that the child never blocks on it.
+        let (tx, rx) = std::sync::mpsc::channel();
+        let err = child.stderr.take().unwrap();
+        let reader = std::thread::spawn(move || {
+            let mut all = String::new();
+            for line in std::io::BufReader::new(err).lines() {
+                let line = line.unwrap();
+                if line.starts_with("running") {
+                    tx.send(()).ok();
+                }
+                all += &line;
+                all.push('\n');
+            }
+            all
+        });
+        rx.recv_timeout(std::time::Duration::from_secs(120))
+            .expect("the field run did not start");
+        std::thread::sleep(std::time::Duration::from_millis(700));
+        unsafe {
+            libc::kill(child.id() as libc::pid_t, sig);
+        }
+        let status = child.wait().unwrap();
+        let stderr = reader.join().unwrap();
+        assert_eq!(status.code(), Some(code), "{stderr}");
+        let run = d.join(name);
+        let m: Metrics =
+            serde_json::from_str(&std::fs::read_to_string(run.join("metrics.json")).unwrap())
+                .unwrap();
+        assert!(!m.completed);
+        assert!(m.iterations < 1_000_000);
+        assert_eq!(m.test_psnr, None);
+        assert!(run.join("model.npz").is_file() && run.join("config.json").is_file());
+        let log = std::fs::read_to_string(run.join("log.csv")).unwrap();
+        assert_eq!(log.lines().count(), m.iterations + 1, "{log}");
+        let o = unispine(&["train", "--resume", name], d);
+        assert_eq!(o.status.code(), Some(1));
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            e.contains("--resume") && e.contains("`naf`") && e.contains("cannot be resumed"),
+            "{e}"
+        );
+    }
+}
+
+#[test]
+fn tensorf_trains_and_saves_a_numpy_readable_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(
+        &[
+            "data",
+            "phantom",
+            "--size",
+            "32",
+            "--detector",
+            "8",
+            "--train-views",
+            "2",
+            "--test-views",
+            "1",
+            "--out",
+            "ph",
+        ],
+        d,
+    );
+    for (lines, out) in [(None, "tf"), (Some("corrected"), "tfc")] {
+        let mut args = vec![
+            "train", "--data", "ph", "--method", "tensorf", "--iters", "2", "--out", out,
+        ];
+        if let Some(l) = lines {
+            args.extend(["--vm-lines", l]);
+        }
+        let text = ok(&args, d);
+        assert!(text.contains("tensorf (reduced): test PSNR"), "{text}");
+        let m: Metrics = serde_json::from_str(
+            &std::fs::read_to_string(d.join(out).join("metrics.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(m.method, "tensorf (reduced)");
+        assert_eq!(m.iterations, 2);
+        assert!(m.test_psnr.is_some() && m.render_fps.unwrap() > 0.0);
+        // 3 x 8 x 256^2 + 3 x 8 x 256 + 32 x 24 VM values, then the 4 x 64 MLP (skip 2).
+        let mlp = (32 * 64 + 64) + (64 * 64 + 64) + (96 * 64 + 64) + (64 + 1);
+        assert_eq!(m.model_bytes, Some(4 * (1_579_776 + mlp)));
+        let cfg: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(d.join(out).join("config.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(cfg["encoder"]["lines"], lines.unwrap_or("upstream"));
+        let mut npz = ndarray_npy::NpzReader::new(
+            std::fs::File::open(d.join(out).join("model.npz")).unwrap(),
+        )
+        .unwrap();
+        let meta: ndarray::Array1<i64> = npz.by_name("vm_meta").unwrap();
+        assert_eq!(meta.to_vec(), vec![256, 8, 32, lines.is_some() as i64]);
+        let planes: ndarray::Array4<f32> = npz.by_name("vm_planes").unwrap();
+        assert_eq!(planes.dim(), (3, 8, 256, 256));
+        let basis: ndarray::Array2<f32> = npz.by_name("vm_basis").unwrap();
+        assert_eq!(basis.dim(), (32, 24));
+    }
+    // --vm-lines belongs to the TensoRF presets only.
+    for method in ["naf", "unispine"] {
+        let o = unispine(
+            &[
+                "train",
+                "--data",
+                "ph",
+                "--method",
+                method,
+                "--vm-lines",
+                "corrected",
+                "--out",
+                "x",
+            ],
+            d,
+        );
+        assert_eq!(o.status.code(), Some(1), "{method}");
+        assert!(
+            String::from_utf8_lossy(&o.stderr).contains("--vm-lines"),
+            "{method}"
+        );
+    }
+}

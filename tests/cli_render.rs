@@ -259,3 +259,76 @@ fn bad_inputs_are_clear_errors() {
     let e = o.stderr;
     assert!(e.contains("opacity") || e.contains("NaN"), "{e}");
 }
+
+/// `render` and `drr` share one per-view geometry check (`geometry::check_view`): a source
+/// inside the volume box, or a detector plane cutting it, is refused by both with the same
+/// message; a source just outside is accepted by both.
+#[test]
+fn render_and_drr_refuse_the_same_views_with_the_same_message() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("m.ply");
+    write_ply(&ply, &scene());
+    // The volume drr projects: 32^3 voxels of 1 mm (npy), box [-16, 16]^3 mm.
+    let vol = dir.path().join("v.npy");
+    ndarray_npy::write_npy(&vol, &ndarray::Array3::<f32>::ones((32, 32, 32))).unwrap();
+    let out = dir.path().join("out");
+    let grid = r#", "nVoxel": [32, 32, 32], "dVoxel": [1.0, 1.0, 1.0]"#;
+    let both = |name: &str, dsd: f64, dso: f64| -> (common::cli::Run, common::cli::Run) {
+        let geo = dir.path().join(name);
+        common::cli::write_geometry(&geo, [dsd, dso], [8, 8], 4.0, grid);
+        let (g, o) = (geo.display().to_string(), out.display().to_string());
+        let r = run(&[
+            "render",
+            "--ply",
+            ply.to_str().unwrap(),
+            "--geometry",
+            &g,
+            "--angle-deg",
+            "0",
+            "--out",
+            &o,
+        ]);
+        let d = run(&[
+            "drr",
+            "--volume",
+            vol.to_str().unwrap(),
+            "--geometry",
+            &g,
+            "--angles-deg",
+            "0",
+            "--out",
+            &o,
+        ]);
+        (r, d)
+    };
+    // The library's sentence, from its first word to the end of the line.
+    let sentence = |e: &str, first: &str| -> String {
+        let at = e
+            .find(first)
+            .unwrap_or_else(|| panic!("`{first}` not in:\n{e}"));
+        e[at..].lines().next().unwrap().to_string()
+    };
+    // Source at x = 10 mm, inside [-16, 16]^3.
+    let (r, d) = both("inside.json", 15.0, 10.0);
+    assert!(!r.ok && !d.ok, "render:\n{}\ndrr:\n{}", r.stderr, d.stderr);
+    assert!(!r.stderr.contains("panicked") && !d.stderr.contains("panicked"));
+    let (sr, sd) = (
+        sentence(&r.stderr, "the source at"),
+        sentence(&d.stderr, "the source at"),
+    );
+    assert_eq!(sr, sd);
+    assert!(sr.contains("lies inside the volume box"), "{sr}");
+    assert!(r.stderr.contains("inside.json") && r.stderr.contains("--angle-deg"));
+    // Source outside (x = 20 mm) but the detector plane at 30 mm from it cuts the box (it
+    // reaches 36 mm).
+    let (r, d) = both("cuts.json", 30.0, 20.0);
+    assert!(!r.ok && !d.ok, "render:\n{}\ndrr:\n{}", r.stderr, d.stderr);
+    assert_eq!(
+        sentence(&r.stderr, "the volume reaches"),
+        sentence(&d.stderr, "the volume reaches")
+    );
+    // Both outside: both accepted.
+    let (r, d) = both("fine.json", 300.0, 200.0);
+    assert!(r.ok, "{}", r.stderr);
+    assert!(d.ok, "{}", d.stderr);
+}

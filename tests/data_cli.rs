@@ -613,3 +613,45 @@ fn noise_and_projector_flags() {
     // 4096 pixels: the ratio's standard error is about sqrt(2 / 4096) = 2.2 %.
     assert!((ratio - 1.0).abs() < 0.1, "{ratio}");
 }
+
+/// A 2-D volume (one voxel in z) projects on even and odd detector sizes alike: its
+/// projection is thinner than one square pixel, so the rows get their own pitch and every row
+/// of every view sees the slice (with square pixels an even detector put it between the two
+/// central rows: "no ray hits the volume").
+#[test]
+fn a_two_d_volume_projects_on_even_and_odd_detectors() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = dir.path().join("slice.npy");
+    let a = Array3::<f32>::from_shape_fn((16, 16, 1), |(i, j, _)| 1.0 + (i + 2 * j) as f32);
+    ndarray_npy::write_npy(&vol, &a).unwrap();
+    for n in [8usize, 9, 16, 17] {
+        let out = dir.path().join(format!("d{n}"));
+        let det = n.to_string();
+        ok(&[
+            "us",
+            "--volume",
+            vol.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--train-views",
+            "4",
+            "--test-views",
+            "2",
+            "--detector",
+            &det,
+        ]);
+        let ds = store::load(&out).unwrap();
+        let g = &ds.geometry;
+        assert_eq!(g.n_detector, [n, n]);
+        assert!(g.d_detector[0] < g.d_detector[1], "{:?}", g.d_detector);
+        for p in ds.train.projections.iter().chain(&ds.test.projections) {
+            for r in 0..n {
+                let row = &p.data[r * n..(r + 1) * n];
+                assert!(
+                    row.iter().any(|&v| v > 0.0),
+                    "detector {n}: row {r} is empty"
+                );
+            }
+        }
+    }
+}

@@ -27,6 +27,7 @@ fn metrics(method: &str, psnr: f64, n: usize) -> Metrics {
         extent: 1285.36,
         render: RenderSettings::default(),
         threads: 2,
+        compaction: None,
     }
 }
 

@@ -223,3 +223,58 @@ fn bad_plans_are_errors_naming_the_line_before_anything_runs() {
     assert!(o.status.success());
     assert!(String::from_utf8_lossy(&o.stdout).contains("name = \"table2\""));
 }
+
+#[test]
+fn a_stopped_cell_resumes_from_its_checkpoint_with_the_same_bits() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let plan = tiny_plan(30, "")
+        .replace("seeds = [0, 1]", "seeds = [0]")
+        .replace(
+            "methods = [\"xgaussian\", \"unispine\"]",
+            "methods = [\"unispine\"]",
+        );
+    std::fs::write(dir.join("plan.toml"), plan).unwrap();
+    let o = reproduce(&["plan.toml", "--out", "a"], dir);
+    assert!(o.status.success(), "{}", text(&o));
+    let cell = dir.join("a/runs/ph/unispine/seed0");
+    let straight = std::fs::read(cell.join("model.ply")).unwrap();
+    let csv = std::fs::read_to_string(dir.join("a/results.csv")).unwrap();
+
+    // What a preempted cell leaves: the same cell's run stopped at iteration 12 with a
+    // checkpoint and `"completed": false`, and its record saying "stopped".
+    let rec_path = cell.join("cell.json");
+    let rec: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&rec_path).unwrap()).unwrap();
+    let args: Vec<String> = serde_json::from_value(rec["args"].clone()).unwrap();
+    let ds = dir.join("a/datasets/ph");
+    let o = Command::new(BIN)
+        .arg("train")
+        .arg("--data")
+        .arg(&ds)
+        .arg("--out")
+        .arg(&cell)
+        .args(&args)
+        .args(["--stop-after", "12"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o));
+    let m = std::fs::read_to_string(cell.join("metrics.json")).unwrap();
+    assert!(m.contains("\"completed\": false"), "{m}");
+    assert!(!cell.join("model.ply").exists());
+    let r = std::fs::read_to_string(&rec_path).unwrap();
+    std::fs::write(&rec_path, r.replace("\"done\"", "\"stopped\"")).unwrap();
+
+    let o = reproduce(&["plan.toml", "--out", "a"], dir);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("resumed, done"), "{}", text(&o));
+    let log = std::fs::read_to_string(cell.join("train.log")).unwrap();
+    assert!(log.contains("resumed from the checkpoint"), "{log}");
+    assert!(log.contains("resuming `unispine`"), "{log}");
+    assert!(
+        std::fs::read(cell.join("model.ply")).unwrap() == straight,
+        "the resumed cell's model.ply differs from the uninterrupted one"
+    );
+    let csv2 = std::fs::read_to_string(dir.join("a/results.csv")).unwrap();
+    assert_eq!(deterministic_columns(&csv2), deterministic_columns(&csv));
+}

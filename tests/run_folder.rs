@@ -321,3 +321,32 @@ fn sigterm_writes_a_checkpoint_exits_143_and_resumes_with_the_same_bits() {
     same_state(&a, &b);
     assert_eq!(log_rows(&sig), log_rows(&root.path().join("straight")));
 }
+
+/// The progress of `train --resume` counts from the iteration it resumed at: the plain-text
+/// progress (stderr is not a terminal here) ends with `train: N/N`, which a count from 0 never
+/// reaches (it would end at N - k).
+#[test]
+fn resumed_progress_counts_from_the_resumed_iteration() {
+    let root = tempfile::tempdir().unwrap();
+    let mut cfg = tiny::tiny(Method::Xgaussian, 24);
+    cfg.checkpoint_every = 0;
+    setup(root.path(), &cfg);
+    let run = root.path().join("r");
+    ok(bin()
+        .current_dir(root.path())
+        .args([
+            "train", "--data", "data", "--config", "cfg.json", "--out", "r",
+        ])
+        .args(["--stop-after", "9"])
+        .output()
+        .unwrap());
+    let o = bin()
+        .args(["train", "--resume"])
+        .arg(&run)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("train: 24/24 "), "{err}");
+    assert!(!err.contains("train: 15/24 "), "{err}");
+}

@@ -1264,3 +1264,67 @@ fn real_ct_crop_to_vertebrae_contains_every_vertebra_voxel() {
     }
     assert_eq!(r.offset, c.offset);
 }
+
+/// Every spatial unit code of `xyzt_units` (bits 0-2; bits 3-5 are the time unit and must be
+/// ignored): 1 metre, 2 mm, 3 micron, 0 unknown (taken as mm). The voxel size and the file
+/// affine (sform) are both converted to mm. Headers written byte by byte from nifti1.h, and
+/// the metre case also by the `nifti` crate's writer (an independent implementation).
+#[test]
+fn nifti_every_spatial_unit_code_scales_voxels_and_affine_to_mm() {
+    let dir = tempfile::tempdir().unwrap();
+    // (xyzt_units, mm per file unit); 10 = mm + seconds (8), 17 = metres + msec (16).
+    for (code, mm) in [
+        (1u8, 1000.0),
+        (2, 1.0),
+        (3, 1e-3),
+        (0, 1.0),
+        (10, 1.0),
+        (17, 1000.0),
+        (11, 1e-3),
+    ] {
+        let mut h = HandNifti::new(4, 16);
+        h.xyzt_units = code;
+        // Voxel sizes in file units, chosen so the mm values are exact in f64.
+        let file = [0.5f32, 0.75, 2.0];
+        h.pixdim[1..4].copy_from_slice(&file);
+        h.sform_code = 1;
+        h.srow = [
+            [0.5, 0.0, 0.0, 8.0],
+            [0.0, -0.75, 0.0, 4.0],
+            [0.0, 0.0, 2.0, -2.0],
+        ];
+        let p = dir.path().join(format!("units{code}.nii"));
+        write(&p, &h.bytes(&i16_ramp_bytes(false)));
+        let v = volume::load(&p).unwrap();
+        let want = file.map(|f| f as f64 * mm);
+        assert_eq!(v.spacing, want, "xyzt_units {code}");
+        let a = v.provenance.file_affine.unwrap();
+        for r in 0..3 {
+            for c in 0..4 {
+                assert_eq!(
+                    a[r][c],
+                    h.srow[r][c] as f64 * mm,
+                    "xyzt_units {code} [{r}][{c}]"
+                );
+            }
+        }
+        assert_ramp_i16(&v);
+    }
+    // Metres through the `nifti` crate's writer.
+    let a = ndarray::Array3::from_shape_fn((DIMS[0], DIMS[1], DIMS[2]), |(i, j, k)| {
+        ramp_value(i, j, k) as f32
+    });
+    let mut hdr = nifti::NiftiHeader {
+        pixdim: [1.0, 0.5, 0.25, 0.125, 1.0, 1.0, 1.0, 1.0],
+        ..Default::default()
+    };
+    hdr.xyzt_units = 1;
+    let p = dir.path().join("metres.nii.gz");
+    nifti::writer::WriterOptions::new(&p)
+        .reference_header(&hdr)
+        .write_nifti(&a)
+        .unwrap();
+    let v = volume::load(&p).unwrap();
+    assert_eq!(v.spacing, [500.0, 250.0, 125.0]);
+    assert_eq!(v.get(3, 2, 1), ramp_value(3, 2, 1) as f32);
+}

@@ -21,6 +21,33 @@ use crate::render::{self, composite, RenderSettings};
 /// Side of the CT-like volume box, mm.
 pub const BOX_MM: f64 = 256.0;
 
+/// Allowed ranges of the render benchmark's cases: Gaussian counts, square detector sizes
+/// (pixels per side) and repetitions. A case beyond them needs more memory than a workstation
+/// has (a Gaussian with its gradient and render state takes about 1 KiB) or never ends.
+pub const BENCH_GAUSSIANS: (usize, usize) = (1, 2_000_000);
+pub const BENCH_SIZES: (usize, usize) = (1, 4096);
+pub const BENCH_REPS: (usize, usize) = (1, 1000);
+
+/// Check the render benchmark's cases against [`BENCH_GAUSSIANS`], [`BENCH_SIZES`] and
+/// [`BENCH_REPS`]; the error names the flag, the value and the allowed range.
+pub fn check_render_cases(gaussians: &[usize], sizes: &[usize], reps: usize) -> crate::Result<()> {
+    let check = |flag: &str, values: &[usize], (lo, hi): (usize, usize)| {
+        if values.is_empty() {
+            return Err(crate::Error::invalid(flag, "needs at least one value"));
+        }
+        match values.iter().find(|&&v| v < lo || v > hi) {
+            Some(v) => Err(crate::Error::invalid(
+                flag,
+                format!("{v} is outside the allowed range [{lo}, {hi}]"),
+            )),
+            None => Ok(()),
+        }
+    };
+    check("--gaussians", gaussians, BENCH_GAUSSIANS)?;
+    check("--sizes", sizes, BENCH_SIZES)?;
+    check("--reps", &[reps], BENCH_REPS)
+}
+
 /// Cone-beam geometry of the benchmark: DSD 1500 mm, DSO 1000 mm, a `size` x `size` detector
 /// whose field of view covers the 256 mm box with margin (420 mm at the detector).
 pub fn bench_geometry(size: usize) -> ConeBeam {

@@ -1,9 +1,11 @@
-//! Numerical audits: gradient checks against central finite differences ([`gradcheck`]) and the
+//! Numerical audits: gradient checks against central finite differences ([`gradcheck`] for the
+//! rasterizer, [`field`] for the neural-field baselines) and the
 //! benchmark scenes ([`bench`]). A gradient check of any stage reports [`Row`]s (stage, case,
 //! variant, parameter group, errors), so a new stage adds its rows to the same table: write a
 //! `rows` function like [`gradcheck::rows`] and print it with the others in `unispine gradcheck`.
 
 pub mod bench;
+pub mod field;
 pub mod gradcheck;
 
 /// Relative error tolerance of every gradient check.
@@ -11,7 +13,7 @@ pub const TOLERANCE: f64 = 1e-6;
 
 /// One line of a gradient check: the analytic gradient of one parameter group against central
 /// finite differences (f64).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Row {
     /// Pipeline stage checked (e.g. `render`).
     pub stage: &'static str,

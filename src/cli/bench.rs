@@ -10,6 +10,12 @@
 //!   flops per blend over the peak f32 rate measured in the same run
 //!   ([`crate::simd::peak_run`]), and the fraction of it reached.
 //!
+//! - `field`: the neural-field baselines ([`crate::field::bench`]): the peak f32 rate of
+//!   independent multiplies and adds on one and on all threads, the MLP forward + backward at
+//!   the NAF width (rows = the preset's rays x samples) in Gflop/s and as a fraction of that
+//!   peak (AVX2 and scalar paths), each preset's per-iteration time split into stages, and the
+//!   process's peak resident memory after the full NAF configuration's iterations.
+//!
 //! (A `train` kind, one full training iteration, belongs to the trainer.)
 
 use anyhow::bail;
@@ -22,7 +28,8 @@ use crate::render::composite;
 /// Arguments of `unispine bench`.
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
-    /// What to benchmark: `render` (rasterizer forward and forward + backward).
+    /// What to benchmark: `render` (rasterizer forward and forward + backward) or `field`
+    /// (neural-field baselines: MLP products, per-iteration stages, memory).
     pub kind: String,
     /// Gaussian counts (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "10000,50000,100000")]
@@ -37,23 +44,29 @@ pub struct BenchArgs {
     /// machine's peak flop rate (`false` to time the rasterizer alone, e.g. under a profiler).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub baselines: bool,
+    /// `field`: presets to time (comma-separated).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "naf,intratomo,nerf,naf-full,intratomo-full,nerf-full"
+    )]
+    pub presets: Vec<String>,
+    /// `field`: timed iterations per reduced preset (full presets: 1).
+    #[arg(long, default_value_t = 5)]
+    pub iters: usize,
 }
 
 /// Run `unispine bench`.
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     match args.kind.as_str() {
         "render" => run_render(&args),
-        k => bail!("unknown benchmark kind `{k}` (available: render)"),
+        "field" => super::bench_field::run(&args),
+        k => bail!("unknown benchmark kind `{k}` (available: render, field)"),
     }
 }
 
 fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
-    if args.gaussians.is_empty() || args.sizes.is_empty() || args.gaussians.contains(&0) {
-        bail!("--gaussians and --sizes need at least one positive value each");
-    }
-    if args.sizes.contains(&0) {
-        bail!("--sizes must be positive");
-    }
+    crate::audit::bench::check_render_cases(&args.gaussians, &args.sizes, args.reps)?;
     println!(
         "render benchmark: CT-like box of {BOX_MM} mm, cone beam, f32, paper RIRF, {} threads, \
          median of {} reps",

@@ -76,7 +76,8 @@ pub struct DatasetFlags {
     #[arg(long, default_value_t = 180.0)]
     pub span_deg: f64,
     /// Detector pixels per side (square). The pixel pitch is chosen so the detector covers the
-    /// projection of the volume's box at every angle, plus `--margin`.
+    /// projection of the volume's box at every angle, plus `--margin` (a 2-D volume, one voxel
+    /// in z, gets rows of their own, finer pitch). At most 8 GiB of projections in all.
     #[arg(long, default_value_t = 256)]
     pub detector: usize,
     /// Extra detector coverage around the volume's projection (0.05 = 5 %).

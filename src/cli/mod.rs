@@ -1,6 +1,7 @@
 //! Command-line front end: one file per subcommand, each with its clap `Args` and `run`.
 
 pub mod bench;
+pub mod bench_field;
 pub mod data;
 pub mod drr;
 pub mod eval;
@@ -34,8 +35,9 @@ pub enum Command {
     Render(render::RenderArgs),
     /// Check every analytic gradient against central finite differences (f64) and print a table.
     Gradcheck(gradcheck::GradcheckArgs),
-    /// Train a model (methods: unispine, xgaussian, 3dgs, spwm-only).
-    Train(train::TrainArgs),
+    /// Train a model (methods: unispine, xgaussian, 3dgs, spwm-only, and the baselines fdk,
+    /// naf, intratomo, tensorf, nerf[-full]).
+    Train(Box<train::TrainArgs>),
     /// Re-evaluate a saved run on its test views.
     Eval(eval::EvalArgs),
     /// Compare finished runs: one markdown table row per run folder (from its metrics.json).
@@ -53,7 +55,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Drr(a) => drr::run(a),
         Command::Render(a) => render::run(a),
         Command::Gradcheck(a) => gradcheck::run(a),
-        Command::Train(a) => train::run(a),
+        Command::Train(a) => train::run(*a),
         Command::Eval(a) => eval::run(a),
         Command::Report(a) => report::run(a),
         Command::Bench(a) => bench::run(a),

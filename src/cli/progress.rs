@@ -19,6 +19,12 @@ pub struct Progress {
 impl Progress {
     /// Start reporting `label` over `total` steps.
     pub fn new(label: &str, total: u64) -> Self {
+        Self::starting_at(label, total, 0)
+    }
+
+    /// Start reporting `label` over `total` steps of which `done` are already done (a resumed
+    /// run): the count starts there and the rate / ETA count only the steps of this session.
+    pub fn starting_at(label: &str, total: u64, done: u64) -> Self {
         let bar = if std::io::stderr().is_terminal() {
             let b = ProgressBar::new(total);
             b.set_style(
@@ -29,6 +35,8 @@ impl Progress {
                 .progress_chars("=> "),
             );
             b.set_prefix(label.to_string());
+            b.set_position(done);
+            b.reset_eta();
             Some(b)
         } else {
             None
@@ -37,7 +45,7 @@ impl Progress {
             bar,
             label: label.to_string(),
             total,
-            done: 0,
+            done,
             start: Instant::now(),
             last_line: Instant::now(),
         }

@@ -194,6 +194,9 @@ fn camera(args: &RenderArgs) -> anyhow::Result<Camera> {
                 angles.len()
             )
         })?;
+        ds.geometry
+            .check_view(angle)
+            .with_context(|| format!("--dataset {} --view {view}", dir.display()))?;
         return Ok(ds.geometry.camera(angle));
     }
     if let (Some(g), Some(a)) = (&args.geometry, args.angle_deg) {
@@ -201,6 +204,8 @@ fn camera(args: &RenderArgs) -> anyhow::Result<Camera> {
         if !a.is_finite() {
             bail!("--angle-deg must be finite (got {a})");
         }
+        geo.check_view(a.to_radians())
+            .with_context(|| format!("--geometry {} --angle-deg {a}", g.display()))?;
         return Ok(geo.camera(a.to_radians()));
     }
     bail!("give either --dataset DIR --view test:K, or --geometry G.json --angle-deg A")

@@ -14,8 +14,8 @@ use crate::reproduce::run::{self, Outcome, RunEvent, RunOptions};
 /// Arguments of `unispine reproduce`.
 #[derive(Debug, clap::Args)]
 pub struct ReproduceArgs {
-    /// A built-in plan (quick, table2, table1, stability, compactness, each with a -full twin)
-    /// or a plan TOML file.
+    /// A built-in plan (quick, table2, table1, stability, compactness, budgets, each with a
+    /// -full twin) or a plan TOML file.
     pub plan: Option<String>,
     /// Output folder (default: reproduce-PLANNAME).
     #[arg(long)]
@@ -69,9 +69,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
             BUILTIN.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
         );
     };
-    if args.jobs == 0 {
-        anyhow::bail!("invalid `--jobs`: must be >= 1");
-    }
+    crate::par::check_workers("--jobs", args.jobs)?;
     let schema = TrainSchema::of_train();
     let plan = Plan::load(plan_arg, &schema)?;
     let out = args
@@ -199,7 +197,11 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
             } => {
                 let what = match outcome {
                     Outcome::Kept => "finished earlier, kept".to_string(),
-                    Outcome::Done { wall_s } => format!("done in {}", fmt_s(*wall_s)),
+                    Outcome::Done { wall_s, resumed } => format!(
+                        "{} in {}",
+                        if *resumed { "resumed, done" } else { "done" },
+                        fmt_s(*wall_s)
+                    ),
                     Outcome::Failed { error } => format!("FAILED: {error}"),
                 };
                 let left = eta_s

@@ -19,7 +19,7 @@ extern "C" fn on_signal(sig: libc::c_int) {
         }
     }
     STOP.store(true, Ordering::SeqCst);
-    let msg = b"\nsignal received: stopping after this iteration and writing a checkpoint ...\n";
+    let msg = b"\nsignal received: stopping after this iteration and saving the run ...\n";
     unsafe {
         libc::write(2, msg.as_ptr().cast(), msg.len());
     }

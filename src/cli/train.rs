@@ -23,7 +23,7 @@ pub struct TrainArgs {
     #[arg(long, required_unless_present = "resume")]
     pub data: Option<PathBuf>,
     /// Method: a Gaussian preset (unispine, xgaussian, 3dgs, spwm-only) or a baseline (fdk,
-    /// naf, intratomo, nerf, naf-full, intratomo-full, nerf-full).
+    /// naf, intratomo, tensorf, nerf, naf-full, intratomo-full, tensorf-full, nerf-full).
     #[arg(long, default_value = "unispine", value_parser = MethodParser)]
     pub method: TrainMethod,
     /// Training iterations (paper: 20000).
@@ -38,6 +38,10 @@ pub struct TrainArgs {
     /// Stop (as on a signal, with a checkpoint) once this many iterations are complete.
     #[arg(long, hide = true)]
     pub stop_after: Option<usize>,
+    /// TensoRF's line factor (tensorf, tensorf-full only): `upstream` (default; SAX-NeRF reads
+    /// the plane at (0, w) instead of the line vector) or `corrected` (the line vector).
+    #[arg(long, value_enum)]
+    pub vm_lines: Option<VmLinesArg>,
     /// rayon threads (default: all cores). Results do not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
@@ -72,6 +76,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         TrainMethod::Gaussians(m) => m,
         TrainMethod::Baseline(b) => return run_baseline(b, &args),
     };
+    if args.vm_lines.is_some() {
+        bail!("invalid `--vm-lines`: only for the TensoRF presets (tensorf, tensorf-full)");
+    }
     init_threads(args.threads)?;
     if args.resume.is_some() && method != Method::Unispine {
         bail!("--method cannot be combined with --resume (the run's config.json is used)");
@@ -79,6 +86,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let (cfg, ds, out) = match &args.resume {
         Some(run) => {
             let rd = RunDir::open(run)?;
+            rd.check_resumable()?;
             let cfg: train::TrainConfig = rd.read_config()?;
             let data = match (&args.data, rd.dataset_path()?) {
                 (Some(d), _) => d.clone(),
@@ -111,39 +119,40 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             "training"
         },
         cfg.method.name(),
-        cfg.iterations,
+        cfg.total_iterations(),
         out.display()
     );
     let mut bar: Option<Progress> = None;
     let mut on_event = |e: &Event| match e {
         Event::Started {
-            total,
             n_gaussians,
             train_views,
             test_views,
             extent,
+            ..
         } => {
             eprintln!(
                 "{n_gaussians} initial Gaussians, {train_views} training / {test_views} test views, \
                  scene extent {extent:.1} mm"
             );
-            bar = Some(Progress::new("train", *total as u64));
         }
         Event::Progress {
+            iteration,
+            total,
             loss,
             psnr,
             n_gaussians,
             its_per_sec,
-            ..
         } => {
-            if let Some(b) = bar.as_mut() {
-                b.inc(
-                    1,
-                    &format!(
-                        "loss {loss:.4} psnr {psnr:.2} dB N {n_gaussians} {its_per_sec:.1} it/s"
-                    ),
-                );
-            }
+            // Created at the first iteration of this session, so that a resumed run counts
+            // from the iteration it resumed at.
+            let b = bar.get_or_insert_with(|| {
+                Progress::starting_at("train", *total as u64, (*iteration - 1) as u64)
+            });
+            b.inc(
+                1,
+                &format!("loss {loss:.4} psnr {psnr:.2} dB N {n_gaussians} {its_per_sec:.1} it/s"),
+            );
         }
         Event::Eval {
             iteration,
@@ -205,8 +214,27 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         m.train_time_s,
         m.render_fps.unwrap_or(f64::NAN)
     );
+    if let Some(c) = &m.compaction {
+        println!(
+            "compaction at iteration {}: {} -> {} Gaussians, test PSNR {:.3} dB before, {:.3} dB \
+             after pruning, {:.3} dB after fine-tuning",
+            c.iteration,
+            c.n_before,
+            c.n_after,
+            c.psnr_before,
+            c.psnr_pruned,
+            m.test_psnr.unwrap_or(f64::NAN)
+        );
+    }
     println!("outputs: {}", out.display());
     Ok(())
+}
+
+/// `--vm-lines`.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum VmLinesArg {
+    Upstream,
+    Corrected,
 }
 
 /// The `--method` parser over the library's list of methods ([`TrainMethod`]): its error
@@ -247,7 +275,8 @@ impl clap::builder::TypedValueParser for MethodParser {
 }
 
 /// `unispine train --method BASELINE`: the baseline's own trainer, the same run folder
-/// (no resume; Ctrl-C stops a field run without evaluation).
+/// (no resume; Ctrl-C / SIGTERM stop a field run after the current iteration without
+/// evaluation and exit 130 / 143).
 fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
     let Some(data) = args.data.as_ref() else {
         bail!("invalid `--data`: a baseline needs a dataset folder");
@@ -259,7 +288,13 @@ fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
         bail!("invalid `--out`: a baseline needs a run folder");
     };
     let ds = crate::dataset::store::load(data)?;
-    let stop = std::sync::atomic::AtomicBool::new(false);
+    // A field run stops at the next iteration boundary on SIGINT / SIGTERM and writes what it
+    // has (model, `metrics.json` with `"completed": false`); FDK is one pass and keeps the
+    // default signal behaviour.
+    let field = matches!(b, Baseline::Field(_));
+    if field {
+        signals::install()?;
+    }
     eprintln!(
         "running `{}` on {} -> {}",
         b.name(),
@@ -279,11 +314,30 @@ fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
             b.inc(1, &format!("loss {loss:.3e} {its_per_sec:.1} it/s"));
         }
     };
-    let m = crate::baseline::run(b, &ds, Some(out), args.iters, &stop, &mut on_event);
+    let opts = crate::baseline::BaselineOptions {
+        iters: args.iters,
+        vm_lines: args.vm_lines.map(|l| match l {
+            VmLinesArg::Upstream => crate::field::encode::VmLines::Upstream,
+            VmLinesArg::Corrected => crate::field::encode::VmLines::Corrected,
+        }),
+    };
+    let m = crate::baseline::run(b, &ds, Some(out), opts, &signals::STOP, &mut on_event);
     if let Some(b) = bar.take() {
         b.finish("");
     }
     let m = m?;
+    if !m.completed {
+        println!(
+            "stopped at iteration {}; model and metrics.json written to {} (baseline runs \
+             cannot be resumed)",
+            m.iterations,
+            out.display()
+        );
+        if let Some(code) = signals::exit_code() {
+            std::process::exit(code);
+        }
+        return Ok(());
+    }
     println!(
         "{}: test PSNR {:.3} dB, SSIM {:.4}, train time {:.2} s, render {:.2} fps",
         m.method,

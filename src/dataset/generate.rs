@@ -8,7 +8,7 @@
 //! (TIGRE `Ax`'s default projector), no noise, a square 256 x 256 detector (the paper uses
 //! 1024 x 1024 at 1 mm; 256 keeps the CPU schedule tractable).
 //!
-//! Detector pitch (square pixels, both axes the same): the detector is made just large enough
+//! Detector pitch (square pixels, both axes the same, except below): the detector is made just large enough
 //! to hold the projection of the volume's bounding box at every angle of a full turn, plus a
 //! margin. With R the radius of the smallest z-axis cylinder around the box (the largest
 //! distance of a box corner from the rotation axis, offOrigin included) and Z the largest
@@ -20,7 +20,11 @@
 //!   point of the cylinder, top or bottom face);
 //! - parallel beam: `u_max = R`, `v_max = Z`.
 //!
-//! `pitch = 2 * max(u_max, v_max) * (1 + margin) / n_detector`, margin 5 % by default. The
+//! `pitch = 2 * max(u_max, v_max) * (1 + margin) / n_detector`, margin 5 % by default. When
+//! the volume's projection is thinner than one such pixel in v (`2 v_max < pitch`: a 2-D
+//! slice, one voxel in z), the rows get their own pitch `2 v_max (1 + margin) / n_detector`
+//! so that every row sees the slice (with square pixels it fell between the two central rows
+//! of an even detector, and only the central row of an odd one saw it). The
 //! bound is conservative (tight for a cylinder); `tests` check it by projecting the eight box
 //! corners at many angles. A volume that reaches the source (R >= DSO) is a geometry error.
 //!
@@ -92,9 +96,27 @@ impl Default for GenerateOptions {
     }
 }
 
+/// Most views per split (training or test).
+pub const MAX_VIEWS: usize = 100_000;
+
+/// Most bytes of projections (f32) a dataset may hold: (training + test views) x detector^2 x 4.
+pub const MAX_PROJECTION_BYTES: u64 = 8 << 30;
+
 impl GenerateOptions {
-    /// Error naming the option when it cannot give a dataset.
+    /// Error naming the option when it cannot give a dataset (each bound with its allowed
+    /// range).
     pub fn validate(&self) -> Result<()> {
+        for (name, n) in [
+            ("train_views", self.train_views),
+            ("test_views", self.test_views),
+        ] {
+            if n > MAX_VIEWS {
+                return Err(Error::invalid(
+                    name,
+                    format!("{n} views is outside the allowed range [1, {MAX_VIEWS}]"),
+                ));
+            }
+        }
         if self.train_views == 0 {
             return Err(Error::invalid(
                 "train_views",
@@ -120,6 +142,19 @@ impl GenerateOptions {
             return Err(Error::invalid(
                 "detector",
                 format!("must be 1..=8192 pixels, got {}", self.detector),
+            ));
+        }
+        let bytes = (self.train_views + self.test_views) as u64 * (self.detector as u64).pow(2) * 4;
+        if bytes > MAX_PROJECTION_BYTES {
+            return Err(Error::invalid(
+                "detector",
+                format!(
+                    "{0} x {0} pixels for {1} views is {bytes} bytes of f32 projections, above \
+                     the allowed {MAX_PROJECTION_BYTES} (8 GiB): use fewer views or a smaller \
+                     detector",
+                    self.detector,
+                    self.train_views + self.test_views
+                ),
             ));
         }
         if !(self.margin.is_finite() && self.margin >= 0.0) {
@@ -196,11 +231,19 @@ pub fn geometry_for(vol: &Volume<f32>, opts: &GenerateOptions) -> Result<ConeBea
     opts.validate()?;
     let (u, v) = projection_half_extent(vol, opts)?;
     let pitch = 2.0 * u.max(v) * (1.0 + opts.margin) / opts.detector as f64;
+    // A volume whose projection is thinner than one square pixel in v (a 2-D slice, one voxel
+    // in z): rows of their own pitch cover it, else it falls between two row centres (an even
+    // detector: no ray hits it) or only the central row sees it (an odd one).
+    let pitch_v = if 2.0 * v < pitch {
+        2.0 * v * (1.0 + opts.margin) / opts.detector as f64
+    } else {
+        pitch
+    };
     let geo = ConeBeam {
         dsd: opts.dsd,
         dso: opts.dso,
         n_detector: [opts.detector, opts.detector],
-        d_detector: [pitch, pitch],
+        d_detector: [pitch_v, pitch],
         n_voxel: vol.dims,
         d_voxel: vol.spacing,
         off_origin: vol.offset,

@@ -65,6 +65,23 @@ pub fn project_views<R: Real>(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Vec<Image2d<R>>> {
     let p = Projector::new(vol, geo, method)?;
+    let bytes = angles.len() as u64
+        * geo.n_detector[0] as u64
+        * geo.n_detector[1] as u64
+        * std::mem::size_of::<R>() as u64;
+    if bytes > crate::dataset::generate::MAX_PROJECTION_BYTES {
+        return Err(Error::invalid(
+            "angles",
+            format!(
+                "{} views of {} x {} pixels is {bytes} bytes of projections, above the allowed \
+                 {} (8 GiB): use fewer angles or a smaller nDetector",
+                angles.len(),
+                geo.n_detector[0],
+                geo.n_detector[1],
+                crate::dataset::generate::MAX_PROJECTION_BYTES
+            ),
+        ));
+    }
     let mut out = Vec::with_capacity(angles.len());
     for (k, &a) in angles.iter().enumerate() {
         out.push(p.view(a)?);
@@ -103,7 +120,7 @@ impl<'a, R: Real> Projector<'a, R> {
             ));
         }
         let cam = self.geo.camera(angle);
-        check_view(&self.grid, &cam, angle)?;
+        crate::geometry::check_view(&cam, (self.grid.lo, self.grid.hi))?;
         let (w, h) = (cam.width, cam.height);
         let mut data = vec![R::zero(); w * h];
         let setup = trilinear::Setup::new(&self.grid, self.geo.accuracy);
@@ -322,62 +339,6 @@ fn check_finite_par<R: Real>(vol: &Volume<R>) -> Result<()> {
         None => Ok(()),
         Some(_) => vol.check_finite("volume"),
     }
-}
-
-/// Per-view geometry checks: the source must lie outside the volume, and the detector plane
-/// must not cut it (both cone beam only).
-fn check_view<R: Real>(grid: &Grid<R>, cam: &Camera, angle: f64) -> Result<()> {
-    if cam.mode != Mode::Cone {
-        return Ok(());
-    }
-    let c = cam.centre;
-    if (0..3).all(|a| c[a] >= grid.lo[a] && c[a] <= grid.hi[a]) {
-        return Err(Error::Geometry(format!(
-            "the source at ({:.3}, {:.3}, {:.3}) mm (view at {:.4} deg) lies inside the volume box \
-             [{:.3}, {:.3}] x [{:.3}, {:.3}] x [{:.3}, {:.3}] mm: increase DSO or move the volume \
-             (offOrigin)",
-            c[0],
-            c[1],
-            c[2],
-            angle.to_degrees(),
-            grid.lo[0],
-            grid.hi[0],
-            grid.lo[1],
-            grid.hi[1],
-            grid.lo[2],
-            grid.hi[2]
-        )));
-    }
-    for corner in 0..8 {
-        let p = [
-            if corner & 1 == 0 {
-                grid.lo[0]
-            } else {
-                grid.hi[0]
-            },
-            if corner & 2 == 0 {
-                grid.lo[1]
-            } else {
-                grid.hi[1]
-            },
-            if corner & 4 == 0 {
-                grid.lo[2]
-            } else {
-                grid.hi[2]
-            },
-        ];
-        let z = cam.world_to_cam(p)[2];
-        if z > cam.dsd {
-            return Err(Error::Geometry(format!(
-                "the volume reaches {:.3} mm from the source along the axis but the detector is at \
-                 DSD = {:.3} mm (view at {:.4} deg): the detector plane cuts the volume",
-                z,
-                cam.dsd,
-                angle.to_degrees()
-            )));
-        }
-    }
-    Ok(())
 }
 
 #[cfg(test)]

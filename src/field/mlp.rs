@@ -3,17 +3,19 @@
 //! layer `i` in `skips` takes `cat([encoding, h])`. PyTorch's default `nn.Linear` init
 //! (weights and biases U(-1/sqrt(fan_in), 1/sqrt(fan_in))).
 //!
-//! Batched: a block of samples goes through each layer as a matrix product whose inner loop
-//! runs along the output features (contiguous, vectorised by the compiler), so every sum is a
-//! fixed sequential order whatever the block and the thread count.
+//! Batched: a block of samples goes through each layer as a matrix product ([`gemm`]: blocked,
+//! register-tiled, AVX2 or scalar with the same bits) in which every sum runs in a fixed
+//! sequential order whatever the block, the instruction set and the thread count.
 //!
 //! Parameter layout (flat): for each layer, `W` as `[in][out]` (input-major) then `b[out]`.
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use super::gemm;
 use crate::error::{Error, Result};
 use crate::real::Real;
+use crate::simd::Simd;
 
 /// Output activation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -113,55 +115,58 @@ impl Mlp {
     }
 
     /// Forward over a block of `n` encodings `x` (`n x in_dim`, row-major). Returns the outputs
-    /// and, when `keep`, the cache for [`Mlp::backward`].
+    /// and, when `keep`, the cache for [`Mlp::backward`] (a fresh workspace; the trainer reuses
+    /// one through [`Mlp::forward_ws`]).
     pub fn forward<R: Real>(&self, p: &[R], x: &[R], n: usize, keep: bool) -> (Vec<R>, Cache<R>) {
-        let mut cache = Cache {
-            inputs: Vec::new(),
-            pre: Vec::new(),
-            out: Vec::new(),
-        };
-        let mut h: Vec<R> = Vec::new();
+        let mut cache = Cache::default();
+        self.forward_ws(Simd::active(), p, x, n, &mut cache);
+        let out = cache.out.clone();
+        if !keep {
+            cache = Cache::default();
+        }
+        (out, cache)
+    }
+
+    /// Forward into the workspace `ws` (buffers grown once and reused): afterwards
+    /// `ws.out[..n]` holds the outputs and `ws` the cache of [`Mlp::backward_ws`]. The matrix
+    /// products run on [`gemm`] with the instruction set `simd` (same bits on every path).
+    pub fn forward_ws<R: Real>(&self, simd: Simd, p: &[R], x: &[R], n: usize, ws: &mut Cache<R>) {
         let slope = R::c(SLOPE);
+        ws.inputs.resize_with(self.layers, Vec::new);
+        ws.pre.resize_with(self.layers, Vec::new);
+        let ed = self.in_dim;
+        let hd = self.hidden;
         for (i, &(inp, out, off)) in self.shape.iter().enumerate() {
-            let input: Vec<R> = if i == 0 {
-                x.to_vec()
-            } else if self.skips.contains(&i) {
-                let mut v = Vec::with_capacity(n * inp);
-                for r in 0..n {
-                    v.extend_from_slice(&x[r * self.in_dim..(r + 1) * self.in_dim]);
-                    v.extend_from_slice(&h[r * self.hidden..(r + 1) * self.hidden]);
-                }
-                v
-            } else {
-                std::mem::take(&mut h)
-            };
             let w = &p[off..off + inp * out];
             let b = &p[off + inp * out..off + inp * out + out];
-            let mut z = vec![R::zero(); n * out];
-            matmul_bias(&input, w, b, n, inp, out, &mut z);
-            let last = i == self.layers - 1;
-            let y: Vec<R> = z
-                .iter()
-                .map(|&v| {
-                    if last {
-                        out_act(self.out_act, v)
-                    } else if v > R::zero() {
-                        v
-                    } else {
-                        v * slope
-                    }
-                })
-                .collect();
-            if keep {
-                cache.inputs.push(input);
-                cache.pre.push(z);
+            if i == 0 {
+                fit(&mut ws.inputs[0], n * inp);
+                ws.inputs[0].copy_from_slice(&x[..n * inp]);
             }
-            h = y;
+            fit(&mut ws.pre[i], n * out);
+            gemm::forward(simd, &ws.inputs[i], w, b, n, inp, out, &mut ws.pre[i]);
+            if i == self.layers - 1 {
+                fit(&mut ws.out, n);
+                for (y, &z) in ws.out.iter_mut().zip(&ws.pre[i]) {
+                    *y = out_act(self.out_act, z);
+                }
+                break;
+            }
+            // The next layer's input: [encoding, h] for a skip layer, else h.
+            let skip = self.skips.contains(&(i + 1));
+            let (enc, next_in) = if skip { (ed, ed + hd) } else { (0, hd) };
+            let (pre, inputs) = (&ws.pre[i], &mut ws.inputs[i + 1]);
+            fit(inputs, n * next_in);
+            for r in 0..n {
+                let row = &mut inputs[r * next_in..(r + 1) * next_in];
+                if skip {
+                    row[..enc].copy_from_slice(&x[r * ed..(r + 1) * ed]);
+                }
+                for (h, &z) in row[enc..].iter_mut().zip(&pre[r * hd..(r + 1) * hd]) {
+                    *h = if z > R::zero() { z } else { z * slope };
+                }
+            }
         }
-        if keep {
-            cache.out = h.clone();
-        }
-        (h, cache)
     }
 
     /// Backward of a block (`cache` from [`Mlp::forward`] with `keep`): `g_y` (n values) is
@@ -174,66 +179,68 @@ impl Mlp {
         g_y: &[R],
         n: usize,
         grad: &mut [R],
+        g_x: Option<&mut [R]>,
+    ) {
+        let mut ws = Cache {
+            inputs: cache.inputs.clone(),
+            pre: cache.pre.clone(),
+            out: cache.out.clone(),
+            ..Cache::default()
+        };
+        self.backward_ws(Simd::active(), p, &mut ws, g_y, n, grad, g_x);
+    }
+
+    /// [`Mlp::backward`] on the workspace filled by [`Mlp::forward_ws`] (its scratch buffers
+    /// are reused): `dW += X^T dY`, `db += 1^T dY` and `dX = dY W^T` per layer on [`gemm`].
+    #[allow(clippy::too_many_arguments)]
+    pub fn backward_ws<R: Real>(
+        &self,
+        simd: Simd,
+        p: &[R],
+        ws: &mut Cache<R>,
+        g_y: &[R],
+        n: usize,
+        grad: &mut [R],
         mut g_x: Option<&mut [R]>,
     ) {
         let slope = R::c(SLOPE);
-        let mut g: Vec<R> = (0..n)
-            .map(|r| {
-                g_y[r] * out_act_grad(self.out_act, cache.pre[self.layers - 1][r], cache.out[r])
-            })
-            .collect();
+        let last = self.layers - 1;
+        fit(&mut ws.g, n);
+        for (r, g) in ws.g.iter_mut().enumerate() {
+            *g = g_y[r] * out_act_grad(self.out_act, ws.pre[last][r], ws.out[r]);
+        }
         if let Some(gx) = g_x.as_deref_mut() {
-            gx.iter_mut().for_each(|v| *v = R::zero());
+            gx[..n * self.in_dim]
+                .iter_mut()
+                .for_each(|v| *v = R::zero());
         }
         for i in (0..self.layers).rev() {
             let (inp, out, off) = self.shape[i];
-            let input = &cache.inputs[i];
-            // dW[in][out] += sum_r input[r][in] g[r][out]; db += sum_r g[r].
             {
                 let (gw, gb) = grad[off..off + inp * out + out].split_at_mut(inp * out);
-                for r in 0..n {
-                    let gr = &g[r * out..(r + 1) * out];
-                    let xr = &input[r * inp..(r + 1) * inp];
-                    for (k, &xv) in xr.iter().enumerate() {
-                        let row = &mut gw[k * out..(k + 1) * out];
-                        for (a, &gv) in row.iter_mut().zip(gr) {
-                            *a += xv * gv;
-                        }
-                    }
-                    for (a, &gv) in gb.iter_mut().zip(gr) {
-                        *a += gv;
-                    }
-                }
+                gemm::grad_weight(simd, &ws.inputs[i], &ws.g, n, inp, out, gw, gb);
             }
             let need_dx = i > 0 || g_x.is_some();
             if !need_dx {
                 break;
             }
-            // dX[r][in] = sum_out g[r][out] W[in][out].
             let w = &p[off..off + inp * out];
-            let mut dx = vec![R::zero(); n * inp];
-            for r in 0..n {
-                let gr = &g[r * out..(r + 1) * out];
-                for k in 0..inp {
-                    let wr = &w[k * out..(k + 1) * out];
-                    let mut acc = R::zero();
-                    for (a, b) in wr.iter().zip(gr) {
-                        acc += *a * *b;
-                    }
-                    dx[r * inp + k] = acc;
-                }
-            }
+            fit(&mut ws.wt, inp * out);
+            gemm::transpose(w, inp, out, &mut ws.wt);
+            fit(&mut ws.dx, n * inp);
+            gemm::grad_input(simd, &ws.g, &ws.wt, n, inp, out, &mut ws.dx);
+            let dx = &ws.dx;
             // Route dX: the encoding part of a skip input (or of layer 0) to g_x, the hidden
             // part through the previous layer's LeakyReLU.
-            let skip = self.skips.contains(&i);
             if i == 0 {
                 if let Some(gx) = g_x.as_deref_mut() {
-                    for (a, &b) in gx.iter_mut().zip(&dx) {
+                    for (a, &b) in gx.iter_mut().zip(&dx[..n * inp]) {
                         *a += b;
                     }
                 }
                 break;
             }
+            let skip = self.skips.contains(&i);
             let (enc, hid) = if skip {
                 (self.in_dim, self.hidden)
             } else {
@@ -248,71 +255,42 @@ impl Mlp {
                     }
                 }
             }
-            let zprev = &cache.pre[i - 1];
-            g = vec![R::zero(); n * hid];
+            let zprev = &ws.pre[i - 1];
+            fit(&mut ws.g_next, n * hid);
             for r in 0..n {
                 for k in 0..hid {
                     let d = dx[r * inp + enc + k];
-                    g[r * hid + k] = if zprev[r * hid + k] > R::zero() {
+                    ws.g_next[r * hid + k] = if zprev[r * hid + k] > R::zero() {
                         d
                     } else {
                         d * slope
                     };
                 }
             }
+            std::mem::swap(&mut ws.g, &mut ws.g_next);
         }
     }
 }
 
-/// What [`Mlp::forward`] keeps for the backward pass: each layer's input and pre-activation,
-/// and the outputs.
+/// Resize `v` to `len` (allocates only when it grows past its capacity).
+fn fit<R: Real>(v: &mut Vec<R>, len: usize) {
+    v.resize(len, R::zero());
+}
+
+/// What [`Mlp::forward`] keeps for the backward pass (each layer's input and pre-activation,
+/// and the outputs) and the backward pass's scratch buffers: the workspace of one block,
+/// reused across blocks and iterations.
+#[derive(Debug, Default)]
 pub struct Cache<R> {
     pub inputs: Vec<Vec<R>>,
     pub pre: Vec<Vec<R>>,
     pub out: Vec<R>,
-}
-
-/// `z[r][o] = b[o] + sum_k x[r][k] w[k][o]`, rows in blocks of 4 so that each weight row is
-/// read once per block; the sum over `k` runs in order for every element.
-fn matmul_bias<R: Real>(x: &[R], w: &[R], b: &[R], n: usize, inp: usize, out: usize, z: &mut [R]) {
-    let mut r = 0;
-    while r + 4 <= n {
-        let (z0, rest) = z[r * out..(r + 4) * out].split_at_mut(out);
-        let (z1, rest) = rest.split_at_mut(out);
-        let (z2, z3) = rest.split_at_mut(out);
-        z0.copy_from_slice(b);
-        z1.copy_from_slice(b);
-        z2.copy_from_slice(b);
-        z3.copy_from_slice(b);
-        for k in 0..inp {
-            let wr = &w[k * out..(k + 1) * out];
-            let (a0, a1, a2, a3) = (
-                x[r * inp + k],
-                x[(r + 1) * inp + k],
-                x[(r + 2) * inp + k],
-                x[(r + 3) * inp + k],
-            );
-            for o in 0..out {
-                let wv = wr[o];
-                z0[o] += a0 * wv;
-                z1[o] += a1 * wv;
-                z2[o] += a2 * wv;
-                z3[o] += a3 * wv;
-            }
-        }
-        r += 4;
-    }
-    while r < n {
-        let zr = &mut z[r * out..(r + 1) * out];
-        zr.copy_from_slice(b);
-        for k in 0..inp {
-            let a = x[r * inp + k];
-            for (zo, &wv) in zr.iter_mut().zip(&w[k * out..(k + 1) * out]) {
-                *zo += a * wv;
-            }
-        }
-        r += 1;
-    }
+    /// dL/d(pre-activation) of the current layer, and of the previous one.
+    g: Vec<R>,
+    g_next: Vec<R>,
+    /// `W^T` of the current layer and `dX`.
+    wt: Vec<R>,
+    dx: Vec<R>,
 }
 
 /// Output activation.

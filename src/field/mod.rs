@@ -1,11 +1,12 @@
-//! Neural attenuation fields: the NAF / IntraTomo / NeRF baselines of Table 1 as SAX-NeRF
+//! Neural attenuation fields: the NAF / IntraTomo / TensoRF / NeRF baselines of Table 1 as SAX-NeRF
 //! (caiyuanhao1998/SAX-NeRF, `src/trainer.py`, `config/*/`) trains them: one trainer, and only
 //! the encoder, the MLP and the sampling differ.
 //!
-//! Stages (one file each, forward and backward): [`encode`] (frequency, hash grid), [`mlp`],
-//! [`render`] (rays, stratified samples, line integral), [`adam`] (PyTorch Adam over a flat
-//! vector), [`train`] (the loop, evaluation, model file). Generic over [`Real`]: f32 to train,
-//! f64 for the gradient checks.
+//! Stages (one file each, forward and backward): [`encode`] (frequency, hash grid, TensoRF VM,
+//! dense grid), [`mlp`] (its matrix products in [`gemm`]), [`render`] (rays, stratified
+//! samples, line integral), [`adam`] (PyTorch Adam over a flat vector), [`train`] (the loop,
+//! evaluation, model file); [`bench`] times them. Generic over [`Real`]: f32 to train, f64 for
+//! the gradient checks.
 //!
 //! Presets ([`FieldConfig::preset`]); `*-full` follow the upstream configs, the others are
 //! reduced to fit a 2-core CPU and are labelled `(reduced)` in `metrics.json`:
@@ -18,11 +19,15 @@
 //! | `intratomo` | as full | as full | 512 x 128 | 300 | 150 epochs, 0.1 |
 //! | `nerf-full` | frequency, 6 bands | 8 x 256, skip 4, LeakyReLU | 1024 x 384 | 3000 | 1500 epochs, 0.1 |
 //! | `nerf` | as full | as full | 256 x 128 | 100 | 50 epochs, 0.1 |
+//! | `tensorf-full` | VM 3 x 8 x 256^2, upstream lines, basis 24 -> 32 | 4 x 64, skip 2, LeakyReLU | 1024 x 384 | 3000 | 1500 epochs, 0.1 |
+//! | `tensorf` | as full | as full | 512 x 128 | 300 | 150 epochs, 0.1 |
 //!
 //! `--iters N` replaces the iteration count and scales the StepLR step in proportion.
 
 pub mod adam;
+pub mod bench;
 pub mod encode;
+pub mod gemm;
 pub mod mlp;
 pub mod model;
 pub mod render;
@@ -34,8 +39,12 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::real::Real;
-use encode::{Encoder, Frequency, HashGrid};
+use encode::{DenseGrid, Encoder, Frequency, GridMap, HashGrid, TensorVm, VmLines};
 use mlp::{Mlp, OutAct};
+
+/// Most iterations of a field run (over 100 x the longest upstream schedule, `intratomo-full`
+/// and `nerf-full`: 3000 epochs x 50 views).
+pub const MAX_ITERATIONS: usize = 20_000_000;
 
 /// Encoder settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -51,6 +60,20 @@ pub enum EncoderConfig {
         table_size: usize,
         base_resolution: usize,
     },
+    /// TensoRF vector-matrix decomposition (SAX-NeRF `tensorf_encoder.py`).
+    TensorVm {
+        /// Plane side and line length (`num_levels` upstream).
+        resolution: usize,
+        /// Components per plane (`density_n_comp`, the rank).
+        components: usize,
+        /// Output width of `basis_mat` (`app_dim`).
+        out_dim: usize,
+        /// `upstream` (the line factor reads the plane, as SAX-NeRF) or `corrected`.
+        lines: VmLines,
+    },
+    /// Dense grid of `resolution^3` vertices (`grid_sample`'s align-corners mapping of
+    /// `x / bound`); the test oracle of the grid encoders.
+    DenseGrid { resolution: usize, features: usize },
 }
 
 /// Every setting of a field run.
@@ -85,12 +108,14 @@ pub struct FieldConfig {
 }
 
 /// The preset names, in table order.
-pub const PRESETS: [&str; 6] = [
+pub const PRESETS: [&str; 8] = [
     "naf",
     "intratomo",
+    "tensorf",
     "nerf",
     "naf-full",
     "intratomo-full",
+    "tensorf-full",
     "nerf-full",
 ];
 
@@ -104,6 +129,14 @@ impl FieldConfig {
             base_resolution: 16,
         };
         let freq = EncoderConfig::Frequency { bands: 6 };
+        // SAX-NeRF `config/tensorf/*.yaml` (`num_levels: 256`) and `tensorf_encoder.py`
+        // (`density_n_comp=8`, `app_dim=32`).
+        let vm = EncoderConfig::TensorVm {
+            resolution: 256,
+            components: 8,
+            out_dim: 32,
+            lines: VmLines::Upstream,
+        };
         let nv = train_views.max(1);
         // (encoder, hidden, layers, skip, act, rays, samples, epochs, step epochs, reduced)
         let (enc, hidden, layers, skip, act, rays, samples, epochs, step, reduced) = match name {
@@ -157,6 +190,20 @@ impl FieldConfig {
                 false,
             ),
             "nerf" => (freq, 256, 8, 4, OutAct::LeakyRelu, 256, 128, 100, 50, true),
+            // 192 coarse + 192 fine samples upstream: one MLP on 384 stratified samples.
+            "tensorf-full" => (
+                vm,
+                64,
+                4,
+                2,
+                OutAct::LeakyRelu,
+                1024,
+                384,
+                3000,
+                1500,
+                false,
+            ),
+            "tensorf" => (vm, 64, 4, 2, OutAct::LeakyRelu, 512, 128, 300, 150, true),
             _ => {
                 return Err(Error::invalid(
                     "method",
@@ -215,6 +262,15 @@ impl FieldConfig {
         pos("n_rays", self.n_rays)?;
         pos("n_samples", self.n_samples)?;
         pos("iterations", self.iterations)?;
+        if self.iterations > MAX_ITERATIONS {
+            return Err(Error::invalid(
+                "iterations",
+                format!(
+                    "{} is outside the allowed range [1, {MAX_ITERATIONS}]",
+                    self.iterations
+                ),
+            ));
+        }
         pos("lr_step", self.lr_step)?;
         pos("eval_stride", self.eval_stride)?;
         if !(self.lr.is_finite() && self.lr > 0.0) {
@@ -262,6 +318,45 @@ impl FieldConfig {
                     ));
                 }
             }
+            EncoderConfig::TensorVm {
+                resolution,
+                components,
+                out_dim,
+                ..
+            } => {
+                if *components == 0 {
+                    return Err(Error::invalid(
+                        "components",
+                        "the TensoRF rank (components per plane) must be >= 1, got 0",
+                    ));
+                }
+                pos("out_dim", *out_dim)?;
+                grid_resolution(*resolution)?;
+                let n = 3 * (*components as u128) * (*resolution as u128).pow(2);
+                if n > MAX_GRID_PARAMS || *out_dim > 4096 {
+                    return Err(Error::invalid(
+                        "components",
+                        format!(
+                            "3 x components x resolution^2 = {n} plane values (at most \
+                             {MAX_GRID_PARAMS}) and out_dim <= 4096 (got {out_dim})"
+                        ),
+                    ));
+                }
+            }
+            EncoderConfig::DenseGrid {
+                resolution,
+                features,
+            } => {
+                pos("features", *features)?;
+                grid_resolution(*resolution)?;
+                let n = (*resolution as u128).pow(3) * *features as u128;
+                if n > MAX_GRID_PARAMS {
+                    return Err(Error::invalid(
+                        "resolution",
+                        format!("resolution^3 x features = {n} values, at most {MAX_GRID_PARAMS}"),
+                    ));
+                }
+            }
         }
         Mlp::new(
             1,
@@ -289,8 +384,43 @@ impl FieldConfig {
                 *base_resolution,
                 self.bound,
             )),
+            EncoderConfig::TensorVm {
+                resolution,
+                components,
+                out_dim,
+                lines,
+            } => Encoder::TensorVm(TensorVm {
+                resolution: *resolution,
+                components: *components,
+                out_dim: *out_dim,
+                bound: self.bound,
+                lines: *lines,
+            }),
+            EncoderConfig::DenseGrid {
+                resolution,
+                features,
+            } => Encoder::DenseGrid(DenseGrid {
+                resolution: *resolution,
+                features: *features,
+                bound: self.bound,
+                map: GridMap::AlignCorners,
+            }),
         }
     }
+}
+
+/// Largest parameter count of a VM's planes or of a dense grid (1 GiB of f32).
+pub const MAX_GRID_PARAMS: u128 = 1 << 28;
+
+/// A grid resolution must be in 2..=65536 (a grid needs two vertices per axis).
+fn grid_resolution(r: usize) -> Result<()> {
+    if !(2..=65536).contains(&r) {
+        return Err(Error::invalid(
+            "resolution",
+            format!("the grid resolution must be in 2..=65536, got {r}"),
+        ));
+    }
+    Ok(())
 }
 
 /// A field: encoder, MLP and their parameters (encoder first, then the MLP's).
@@ -302,7 +432,8 @@ pub struct Field<R: Real> {
 }
 
 impl<R: Real> Field<R> {
-    /// Validate `cfg` and initialise (hash features U(-1e-4, 1e-4), PyTorch Linear init).
+    /// Validate `cfg` and initialise (hash and dense-grid features U(-1e-4, 1e-4), TensoRF as
+    /// [`TensorVm::init`], PyTorch Linear init).
     pub fn new(cfg: &FieldConfig) -> Result<Field<R>> {
         cfg.validate()?;
         let encoder = cfg.build_encoder();
@@ -316,8 +447,12 @@ impl<R: Real> Field<R> {
         let ne = encoder.n_params();
         let mut params = vec![R::zero(); ne + mlp.n_params];
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed ^ 0xf1e1_d000_0000_0001);
-        for v in &mut params[..ne] {
-            *v = R::c(rng.random_range(-1e-4..1e-4));
+        if let Encoder::TensorVm(vm) = &encoder {
+            params[..ne].copy_from_slice(&vm.init::<R>(&mut || rng.random::<f64>()));
+        } else {
+            for v in &mut params[..ne] {
+                *v = R::c(rng.random_range(-1e-4..1e-4));
+            }
         }
         params[ne..].copy_from_slice(&mlp.init::<R>(cfg.seed ^ 0xf1e1_d000_0000_0002));
         Ok(Field {
@@ -334,13 +469,18 @@ impl<R: Real> Field<R> {
 
     /// Encode a block of points (`n x out_dim`).
     pub fn encode(&self, pts: &[[R; 3]]) -> Vec<R> {
+        let mut out = vec![R::zero(); pts.len() * self.encoder.out_dim()];
+        self.encode_into(pts, &mut out);
+        out
+    }
+
+    /// [`Field::encode`] into `out` (`n x out_dim`).
+    pub fn encode_into(&self, pts: &[[R; 3]], out: &mut [R]) {
         let e = self.encoder.out_dim();
-        let mut out = vec![R::zero(); pts.len() * e];
         let ep = &self.params[..self.n_encoder_params()];
         for (p, o) in pts.iter().zip(out.chunks_mut(e)) {
             self.encoder.encode(ep, *p, o);
         }
-        out
     }
 
     /// Attenuation at a block of points.

@@ -11,7 +11,14 @@
 //! - hash grid: `hash_meta` (i64 `[4]`: levels, features, log2 table size, base resolution),
 //!   `hash_offsets` (i64 `[levels + 1]`, first entry of each level), `hash_table`
 //!   (`[entries, features]`), `bound` (f64 `[1]`, metres); indexing as in
-//!   [`super::encode::hash_grid`].
+//!   [`super::encode::hash_grid`];
+//! - TensoRF VM: `vm_meta` (i64 `[4]`: resolution N, components C, output width, line mode 0
+//!   upstream (the line factor reads the plane's column at x = 0) / 1 corrected),
+//!   `vm_planes` (`[3, C, N, N]`, PyTorch's `density_plane` stacked), `vm_lines`
+//!   (`[3, C, N]`), `vm_basis` (`[out, 3C]`, `basis_mat.weight`), `bound`; reads as in
+//!   [`super::encode::tensor_vm`];
+//! - dense grid: `dense_table` (`[N, N, N, F]`, indexed `[z, y, x]`), `bound`; reads as in
+//!   [`super::encode::dense_grid`] (align-corners mapping).
 //!
 //! The density at a point `p` (metres, clamped to `+-(bound - 1e-6)`) is the MLP applied to
 //! the encoding; it is the volume value divided by the dataset volume's maximum (see
@@ -90,6 +97,41 @@ pub fn save(path: &Path, field: &Field<f32>) -> Result<()> {
             .map_err(|e| Error::format(path, "hash_table", e.to_string()))?;
             npz.add_array("hash_table", &t).map_err(err)?;
             npz.add_array("bound", &Array1::from(vec![h.bound]))
+                .map_err(err)?;
+        }
+        Encoder::TensorVm(v) => {
+            let (n, c) = (v.resolution, v.components);
+            let (loff, boff) = v.offsets();
+            let lines = match v.lines {
+                super::encode::VmLines::Upstream => 0i64,
+                super::encode::VmLines::Corrected => 1,
+            };
+            npz.add_array(
+                "vm_meta",
+                &Array1::from(vec![n as i64, c as i64, v.out_dim as i64, lines]),
+            )
+            .map_err(err)?;
+            let p = &field.params[..ne];
+            let shape_err = |k: &str, e: ndarray::ShapeError| Error::format(path, k, e.to_string());
+            let planes = ndarray::Array4::from_shape_vec((3, c, n, n), p[..loff].to_vec())
+                .map_err(|e| shape_err("vm_planes", e))?;
+            npz.add_array("vm_planes", &planes).map_err(err)?;
+            let l = ndarray::Array3::from_shape_vec((3, c, n), p[loff..boff].to_vec())
+                .map_err(|e| shape_err("vm_lines", e))?;
+            npz.add_array("vm_lines", &l).map_err(err)?;
+            let b = Array2::from_shape_vec((v.out_dim, 3 * c), p[boff..].to_vec())
+                .map_err(|e| shape_err("vm_basis", e))?;
+            npz.add_array("vm_basis", &b).map_err(err)?;
+            npz.add_array("bound", &Array1::from(vec![v.bound]))
+                .map_err(err)?;
+        }
+        Encoder::DenseGrid(d) => {
+            let n = d.resolution;
+            let t =
+                ndarray::Array4::from_shape_vec((n, n, n, d.features), field.params[..ne].to_vec())
+                    .map_err(|e| Error::format(path, "dense_table", e.to_string()))?;
+            npz.add_array("dense_table", &t).map_err(err)?;
+            npz.add_array("bound", &Array1::from(vec![d.bound]))
                 .map_err(err)?;
         }
     }

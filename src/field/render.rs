@@ -57,30 +57,34 @@ pub fn near_far(geo: &ConeBeam) -> (f64, f64) {
 
 /// Stratified sample depths of one ray (`n >= 1`), jittered with `rng`.
 pub fn stratified(near: f64, far: f64, n: usize, rng: &mut ChaCha8Rng) -> Vec<f64> {
-    let z: Vec<f64> = (0..n)
-        .map(|i| {
-            if n == 1 {
-                near
-            } else {
-                near + (far - near) * i as f64 / (n - 1) as f64
-            }
-        })
-        .collect();
-    (0..n)
-        .map(|i| {
-            let lo = if i == 0 {
-                z[0]
-            } else {
-                0.5 * (z[i - 1] + z[i])
-            };
-            let hi = if i + 1 == n {
-                z[n - 1]
-            } else {
-                0.5 * (z[i] + z[i + 1])
-            };
-            lo + (hi - lo) * rng.random::<f64>()
-        })
-        .collect()
+    let mut t = Vec::with_capacity(n);
+    stratified_into(near, far, n, rng, &mut t);
+    t
+}
+
+/// [`stratified`] into `t` (resized to `n`; no allocation once it has grown).
+pub fn stratified_into(near: f64, far: f64, n: usize, rng: &mut ChaCha8Rng, t: &mut Vec<f64>) {
+    let z = |i: usize| {
+        if n == 1 {
+            near
+        } else {
+            near + (far - near) * i as f64 / (n - 1) as f64
+        }
+    };
+    t.clear();
+    t.extend((0..n).map(|i| {
+        let lo = if i == 0 {
+            z(0)
+        } else {
+            0.5 * (z(i - 1) + z(i))
+        };
+        let hi = if i + 1 == n {
+            z(n - 1)
+        } else {
+            0.5 * (z(i) + z(i + 1))
+        };
+        lo + (hi - lo) * rng.random::<f64>()
+    }));
 }
 
 /// The seeded generator of one ray's jitter (one stream per purpose, iteration and ray).
@@ -90,13 +94,27 @@ pub fn ray_rng(seed: u64, purpose: u64, a: u64, b: u64) -> ChaCha8Rng {
     r
 }
 
-/// Sample points (clamped to `+-(bound - 1e-6)`) and their `delta` weights of a ray.
+/// Sample points (clamped to `+-(bound - 1e-6)`) and their `delta` weights of a ray, appended.
 pub fn samples<R: Real>(
     ray: &Ray,
     t: &[f64],
     bound: f64,
     pts: &mut Vec<[R; 3]>,
     delta: &mut Vec<R>,
+) {
+    let (p0, d0) = (pts.len(), delta.len());
+    pts.resize(p0 + t.len(), [R::zero(); 3]);
+    delta.resize(d0 + t.len(), R::zero());
+    samples_into(ray, t, bound, &mut pts[p0..], &mut delta[d0..]);
+}
+
+/// [`samples`] into slices of `t.len()` values.
+pub fn samples_into<R: Real>(
+    ray: &Ray,
+    t: &[f64],
+    bound: f64,
+    pts: &mut [[R; 3]],
+    delta: &mut [R],
 ) {
     let norm = (ray.d[0] * ray.d[0] + ray.d[1] * ray.d[1] + ray.d[2] * ray.d[2]).sqrt();
     let b = bound - 1e-6;
@@ -106,13 +124,13 @@ pub fn samples<R: Real>(
             (ray.o[1] + ray.d[1] * ti).clamp(-b, b),
             (ray.o[2] + ray.d[2] * ti).clamp(-b, b),
         ];
-        pts.push([R::c(p[0]), R::c(p[1]), R::c(p[2])]);
+        pts[i] = [R::c(p[0]), R::c(p[1]), R::c(p[2])];
         let dt = if i + 1 < t.len() {
             t[i + 1] - ti
         } else {
             1e-10
         };
-        delta.push(R::c(dt * norm));
+        delta[i] = R::c(dt * norm);
     }
 }
 
@@ -124,4 +142,12 @@ pub fn line_integral<R: Real>(mu: &[R], delta: &[R]) -> R {
         acc += *m * *d;
     }
     acc
+}
+
+/// Backward of [`line_integral`]: `g_mu[i] = g_acc delta_i`.
+#[inline]
+pub fn line_integral_vjp<R: Real>(g_acc: R, delta: &[R], g_mu: &mut [R]) {
+    for (g, d) in g_mu.iter_mut().zip(delta) {
+        *g = g_acc * *d;
+    }
 }

@@ -13,9 +13,12 @@
 //! Work split: blocks of [`RAYS_PER_BLOCK`] rays run in parallel (samples, encoding, MLP
 //! forward and backward, per-block MLP gradient); the blocks' gradients and losses are added in
 //! block order, then the encoder gradient is scattered level by level from the saved
-//! per-sample encoding gradients. Bit-identical for any thread count.
+//! per-sample encoding gradients. Bit-identical for any thread count. The per-sample buffers
+//! (points, encodings, MLP caches, gradients) live in a [`Workspace`] kept by the trainer and
+//! are not reallocated once grown; the batch's ray list and pixel permutation still are.
 
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Mutex;
 use std::time::Instant;
 
 use rand::{RngExt, SeedableRng};
@@ -23,6 +26,7 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 use super::adam::FlatAdam;
+use super::mlp::Cache;
 use super::render::{self, Ray, MM};
 use super::{Field, FieldConfig};
 use crate::dataset::Dataset;
@@ -31,6 +35,7 @@ use crate::geometry::ConeBeam;
 use crate::image2d::Image2d;
 use crate::optim::schedule::StepLr;
 use crate::real::Real;
+use crate::simd::Simd;
 
 /// Rays per parallel block.
 pub const RAYS_PER_BLOCK: usize = 8;
@@ -41,7 +46,8 @@ const RNG_TRAIN_JITTER: u64 = 2;
 const RNG_EVAL_JITTER: u64 = 3;
 
 /// Forward + backward of a batch of rays with targets. Returns the loss (mean squared error
-/// over the rays) and the gradient of every parameter.
+/// over the rays) and the gradient of every parameter (a fresh [`Workspace`]; the trainer
+/// reuses one through [`Workspace::loss_and_grad`]).
 pub fn loss_and_grad<R: Real>(
     field: &Field<R>,
     rays: &[Ray],
@@ -51,84 +57,228 @@ pub fn loss_and_grad<R: Real>(
     bound: f64,
     jitter: &(dyn Fn(usize) -> ChaCha8Rng + Sync),
 ) -> (f64, Vec<R>) {
-    let ne = field.n_encoder_params();
-    let nm = field.mlp.n_params;
-    let ed = field.encoder.out_dim();
-    let b = R::c(rays.len() as f64);
-    let want_gx = ne > 0;
-    struct Block<R> {
-        loss: f64,
-        g_mlp: Vec<R>,
-        pts: Vec<[R; 3]>,
-        g_x: Vec<R>,
+    let mut ws = Workspace::default();
+    let loss = ws.loss_and_grad(
+        Simd::active(),
+        field,
+        rays,
+        targets,
+        near_far,
+        n_samples,
+        bound,
+        jitter,
+    );
+    (loss, ws.grad)
+}
+
+/// The scratch memory of one block on one thread: sample depths and weights, the encoding, the
+/// density gradient and the MLP's cache.
+#[derive(Debug, Default)]
+struct BlockScratch<R> {
+    t: Vec<f64>,
+    delta: Vec<R>,
+    enc: Vec<R>,
+    g_mu: Vec<R>,
+    mlp: Cache<R>,
+}
+
+/// Buffers of [`Workspace::loss_and_grad`], kept across iterations so that an iteration
+/// allocates nothing once they have grown: scratch per worker thread, and per block (in
+/// block order) its loss, MLP gradient, sample points and encoding gradient.
+#[derive(Debug, Default)]
+pub struct Workspace<R> {
+    scratch: Vec<Mutex<BlockScratch<R>>>,
+    loss: Vec<f64>,
+    g_mlp: Vec<R>,
+    pts: Vec<[R; 3]>,
+    g_x: Vec<R>,
+    /// The gradient of the last call (encoder parameters, then the MLP's).
+    pub grad: Vec<R>,
+}
+
+impl<R: Real> Workspace<R> {
+    /// Loss and gradient (into [`Workspace::grad`]) of a batch, the MLP products on the
+    /// instruction set `simd`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn loss_and_grad(
+        &mut self,
+        simd: Simd,
+        field: &Field<R>,
+        rays: &[Ray],
+        targets: &[R],
+        near_far: (f64, f64),
+        n_samples: usize,
+        bound: f64,
+        jitter: &(dyn Fn(usize) -> ChaCha8Rng + Sync),
+    ) -> f64 {
+        self.run(
+            simd, field, rays, targets, near_far, n_samples, bound, jitter, None,
+        )
     }
-    let blocks: Vec<Block<R>> = rays
-        .par_chunks(RAYS_PER_BLOCK)
-        .enumerate()
-        .map(|(bi, chunk)| {
-            let mut pts = Vec::with_capacity(chunk.len() * n_samples);
-            let mut delta = Vec::with_capacity(chunk.len() * n_samples);
-            for (j, ray) in chunk.iter().enumerate() {
-                let mut rng = jitter(bi * RAYS_PER_BLOCK + j);
-                let t = render::stratified(near_far.0, near_far.1, n_samples, &mut rng);
-                render::samples(ray, &t, bound, &mut pts, &mut delta);
-            }
-            let n = pts.len();
-            let enc = field.encode(&pts);
-            let mp = &field.params[ne..];
-            let (mu, cache) = field.mlp.forward(mp, &enc, n, true);
-            let mut g_mu = vec![R::zero(); n];
-            let mut loss = 0.0;
-            for j in 0..chunk.len() {
-                let s = j * n_samples..(j + 1) * n_samples;
-                let acc = render::line_integral(&mu[s.clone()], &delta[s.clone()]);
-                let r = acc - targets[bi * RAYS_PER_BLOCK + j];
-                loss += r.f64() * r.f64();
-                let g_acc = R::c(2.0) * r / b;
-                for i in s {
-                    g_mu[i] = g_acc * delta[i];
+
+    /// [`Workspace::loss_and_grad`], adding the seconds of each stage (per thread, summed
+    /// over the blocks) to `times` when given.
+    #[allow(clippy::too_many_arguments)]
+    pub fn run(
+        &mut self,
+        simd: Simd,
+        field: &Field<R>,
+        rays: &[Ray],
+        targets: &[R],
+        near_far: (f64, f64),
+        n_samples: usize,
+        bound: f64,
+        jitter: &(dyn Fn(usize) -> ChaCha8Rng + Sync),
+        times: Option<&Mutex<StageTimes>>,
+    ) -> f64 {
+        let ne = field.n_encoder_params();
+        let nm = field.mlp.n_params;
+        let ed = field.encoder.out_dim();
+        let b = R::c(rays.len() as f64);
+        let want_gx = ne > 0;
+        let n_blocks = rays.len().div_ceil(RAYS_PER_BLOCK);
+        let n_pts = rays.len() * n_samples;
+        let threads = rayon::current_num_threads().max(1);
+        if self.scratch.len() < threads {
+            self.scratch.resize_with(threads, Default::default);
+        }
+        self.loss.resize(n_blocks, 0.0);
+        self.g_mlp.resize(n_blocks * nm, R::zero());
+        self.pts.resize(n_pts, [R::zero(); 3]);
+        self.g_x
+            .resize(if want_gx { n_pts * ed } else { n_blocks }, R::zero());
+        let per_block = RAYS_PER_BLOCK * n_samples;
+        let scratch = &self.scratch;
+        let mp = &field.params[ne..];
+        // Without encoder parameters each block gets a 1-value placeholder.
+        let gx_chunk = if want_gx { per_block * ed } else { 1 };
+        rays.par_chunks(RAYS_PER_BLOCK)
+            .zip(self.loss.par_iter_mut())
+            .zip(self.g_mlp.par_chunks_mut(nm.max(1)))
+            .zip(self.pts.par_chunks_mut(per_block))
+            .zip(self.g_x.par_chunks_mut(gx_chunk))
+            .enumerate()
+            .for_each(|(bi, ((((chunk, loss), g_mlp), pts), g_x))| {
+                let slot = rayon::current_thread_index().unwrap_or(0) % scratch.len();
+                let mut guard = scratch[slot].lock().unwrap_or_else(|e| e.into_inner());
+                let s = &mut *guard;
+                let n = pts.len();
+                let mut clock = Clock::new(times.is_some());
+                s.delta.resize(n, R::zero());
+                for (j, ray) in chunk.iter().enumerate() {
+                    let mut rng = jitter(bi * RAYS_PER_BLOCK + j);
+                    render::stratified_into(near_far.0, near_far.1, n_samples, &mut rng, &mut s.t);
+                    let r = j * n_samples..(j + 1) * n_samples;
+                    render::samples_into(ray, &s.t, bound, &mut pts[r.clone()], &mut s.delta[r]);
                 }
+                let t_sample = clock.lap();
+                s.enc.resize(n * ed, R::zero());
+                field.encode_into(pts, &mut s.enc);
+                let t_encode = clock.lap();
+                field.mlp.forward_ws(simd, mp, &s.enc, n, &mut s.mlp);
+                let t_fwd = clock.lap();
+                let mu = &s.mlp.out;
+                s.g_mu.resize(n, R::zero());
+                let mut l = 0.0;
+                for j in 0..chunk.len() {
+                    let r = j * n_samples..(j + 1) * n_samples;
+                    let acc = render::line_integral(&mu[r.clone()], &s.delta[r.clone()]);
+                    let res = acc - targets[bi * RAYS_PER_BLOCK + j];
+                    l += res.f64() * res.f64();
+                    let g_acc = R::c(2.0) * res / b;
+                    render::line_integral_vjp(g_acc, &s.delta[r.clone()], &mut s.g_mu[r]);
+                }
+                *loss = l;
+                let t_render = clock.lap();
+                g_mlp.iter_mut().for_each(|v| *v = R::zero());
+                let gx = want_gx.then_some(&mut g_x[..]);
+                field
+                    .mlp
+                    .backward_ws(simd, mp, &mut s.mlp, &s.g_mu, n, g_mlp, gx);
+                let t_bwd = clock.lap();
+                if let Some(tm) = times {
+                    let mut tm = tm.lock().unwrap_or_else(|e| e.into_inner());
+                    tm.sample += t_sample;
+                    tm.encode += t_encode;
+                    tm.mlp_forward += t_fwd;
+                    tm.render += t_render;
+                    tm.mlp_backward += t_bwd;
+                }
+            });
+        self.grad.resize(ne + nm, R::zero());
+        self.grad.iter_mut().for_each(|v| *v = R::zero());
+        let mut loss = 0.0;
+        for (l, g) in self.loss.iter().zip(self.g_mlp.chunks(nm.max(1))) {
+            loss += *l;
+            for (a, &gv) in self.grad[ne..].iter_mut().zip(g) {
+                *a += gv;
             }
-            let mut g_mlp = vec![R::zero(); nm];
-            let mut g_x = if want_gx {
-                vec![R::zero(); n * ed]
-            } else {
-                Vec::new()
-            };
-            field.mlp.backward(
-                mp,
-                &cache,
-                &g_mu,
-                n,
-                &mut g_mlp,
-                want_gx.then_some(&mut g_x[..]),
+        }
+        if want_gx {
+            let t0 = Instant::now();
+            field.encoder.backward(
+                &field.params[..ne],
+                &self.pts,
+                &self.g_x,
+                ed,
+                0,
+                &mut self.grad[..ne],
             );
-            Block {
-                loss,
-                g_mlp,
-                pts,
-                g_x,
+            if let Some(tm) = times {
+                tm.lock().unwrap_or_else(|e| e.into_inner()).encode_backward +=
+                    t0.elapsed().as_secs_f64();
             }
-        })
-        .collect();
-    let mut grad = vec![R::zero(); ne + nm];
-    let mut loss = 0.0;
-    for bl in &blocks {
-        loss += bl.loss;
-        for (a, &g) in grad[ne..].iter_mut().zip(&bl.g_mlp) {
-            *a += g;
+        }
+        loss / rays.len() as f64
+    }
+}
+
+/// Seconds spent in each stage of [`Workspace::run`] (summed over blocks and threads, so
+/// CPU seconds; the encoder backward is wall time of its level-parallel scatter).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StageTimes {
+    pub sample: f64,
+    pub encode: f64,
+    pub mlp_forward: f64,
+    pub render: f64,
+    pub mlp_backward: f64,
+    pub encode_backward: f64,
+}
+
+/// A stopwatch of the calling thread's CPU time (so that other processes on a shared machine
+/// do not inflate it), read only when enabled.
+struct Clock(Option<f64>);
+
+impl Clock {
+    fn new(on: bool) -> Self {
+        Clock(on.then(|| cpu_seconds(libc::CLOCK_THREAD_CPUTIME_ID)))
+    }
+    /// Seconds since the last lap (0 when disabled), restarting.
+    fn lap(&mut self) -> f64 {
+        match &mut self.0 {
+            Some(t) => {
+                let now = cpu_seconds(libc::CLOCK_THREAD_CPUTIME_ID);
+                let d = now - *t;
+                *t = now;
+                d
+            }
+            None => 0.0,
         }
     }
-    if want_gx {
-        let mut pts = Vec::new();
-        let mut gx = Vec::new();
-        for bl in blocks {
-            pts.extend(bl.pts);
-            gx.extend(bl.g_x);
-        }
-        field.encoder.backward(&pts, &gx, ed, 0, &mut grad[..ne]);
+}
+
+/// CPU seconds of the clock `id` (`CLOCK_THREAD_CPUTIME_ID`, `CLOCK_PROCESS_CPUTIME_ID`); NaN
+/// when the OS does not tell.
+pub fn cpu_seconds(id: libc::clockid_t) -> f64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid timespec to write to.
+    if unsafe { libc::clock_gettime(id, &mut ts) } != 0 {
+        return f64::NAN;
     }
-    (loss / rays.len() as f64, grad)
+    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
 }
 
 /// Line integrals (metres x normalised value) along `rays`, jittered by `jitter(ray index)`.
@@ -226,6 +376,8 @@ pub struct FieldTrainer<'a> {
     valid: Vec<Vec<u32>>,
     scale: f64,
     near_far: (f64, f64),
+    /// Buffers reused by every iteration.
+    pub work: Workspace<f32>,
 }
 
 impl<'a> FieldTrainer<'a> {
@@ -270,6 +422,7 @@ impl<'a> FieldTrainer<'a> {
             field,
             iteration: 0,
             valid,
+            work: Workspace::default(),
         })
     }
 
@@ -306,7 +459,8 @@ impl<'a> FieldTrainer<'a> {
         let it = self.iteration + 1;
         let (view, rays, targets) = self.batch(it);
         let seed = self.cfg.seed;
-        let (loss, grad) = loss_and_grad(
+        let loss = self.work.loss_and_grad(
+            Simd::active(),
             &self.field,
             &rays,
             &targets,
@@ -315,6 +469,7 @@ impl<'a> FieldTrainer<'a> {
             self.cfg.bound,
             &|i| render::ray_rng(seed, RNG_TRAIN_JITTER, it as u64, i as u64),
         );
+        let grad = &self.work.grad;
         let diverged = |what: String| Error::Diverged {
             iteration: it,
             what,
@@ -329,7 +484,7 @@ impl<'a> FieldTrainer<'a> {
             )));
         }
         let lr = self.sched.at(it);
-        self.adam.update(&mut self.field.params, &grad, lr);
+        self.adam.update(&mut self.field.params, grad, lr);
         if let Some(i) = self.field.params.iter().position(|p| !p.is_finite()) {
             return Err(diverged(format!("parameter {i} became non-finite")));
         }

@@ -154,6 +154,17 @@ pub fn psnr_vs_count(rows: &[Row], dataset: &str) -> String {
                 Some((mean_sd(&n).0, mean_sd(&y).0)).filter(|p| p.0.is_finite())
             })
             .collect();
+        // A compaction ladder ends at the unbounded model it pruned.
+        let unb = crate::reproduce::compactness::unbounded(rows);
+        if let Some((_, _, n, y)) = unb.iter().find(|u| u.0 == dataset && u.1 == *m) {
+            pts.push((*n, *y));
+            p.markers.push(Marker {
+                label: format!("{m} unbounded"),
+                x: *n,
+                y: *y,
+                colour: ci,
+            });
+        }
         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
         p.lines.push(Line {
             label: m.clone(),

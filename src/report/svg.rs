@@ -353,6 +353,11 @@ impl Panel {
                 }
             }
         }
+        // Labels: on the side with room (right of the marker in the left half, else left;
+        // above it in the lower half, else below), then moved down or up in steps of one text
+        // line until the label's box overlaps no label placed before it (close points, e.g.
+        // two methods with nearly the same PSNR and fps); a moved label gets a leader line.
+        let mut placed: Vec<[f64; 4]> = Vec::new();
         for m in &self.markers {
             let yv = self.y_value(m.y);
             let mx = self.x_value(m.x);
@@ -367,26 +372,59 @@ impl Panel {
                 py(yv),
                 escape(&m.label),
             );
-            // Label on the side with room: right of the marker in the left half, else left;
-            // above it in the lower half, else below.
             let (lx, anchor) = if px(mx) < x0 + w / 2.0 {
                 (px(mx) + 7.0, "start")
             } else {
                 (px(mx) - 7.0, "end")
             };
-            let ly = if py(yv) > y0 + h / 2.0 {
+            let ly0 = if py(yv) > y0 + h / 2.0 {
                 py(yv) - 7.0
             } else {
                 py(yv) + 15.0
             };
+            let tw = LABEL_CHAR_W * m.label.chars().count() as f64;
+            let bx = |ly: f64| -> [f64; 4] {
+                let x = if anchor == "start" { lx } else { lx - tw };
+                [x, ly - LABEL_H + 2.0, x + tw, ly + 2.0]
+            };
+            let hits = |b: [f64; 4]| {
+                placed
+                    .iter()
+                    .any(|p| b[0] < p[2] && p[0] < b[2] && b[1] < p[3] && p[1] < b[3])
+            };
+            let mut ly = ly0;
+            for k in 1..=2 * MAX_LABEL_MOVES {
+                if !hits(bx(ly)) {
+                    break;
+                }
+                // 1, -1, 2, -2, ... lines away from the first place.
+                let step = k.div_ceil(2) as f64 * if k % 2 == 1 { 1.0 } else { -1.0 };
+                ly = ly0 + step * LABEL_H;
+            }
+            placed.push(bx(ly));
+            if ly != ly0 {
+                let _ = writeln!(
+                    out,
+                    r##"<line x1="{:.1}" y1="{:.1}" x2="{lx:.1}" y2="{:.1}" stroke="#999" stroke-width="0.8"/>"##,
+                    px(mx),
+                    py(yv),
+                    ly - LABEL_H / 2.0 + 2.0
+                );
+            }
             let _ = writeln!(
                 out,
-                r#"<text x="{lx:.1}" y="{ly:.1}" font-size="11" text-anchor="{anchor}">{}</text>"#,
+                r#"<text class="marker-label" x="{lx:.1}" y="{ly:.1}" font-size="11" text-anchor="{anchor}">{}</text>"#,
                 escape(&m.label)
             );
         }
     }
 }
+
+/// Approximate width of one character of an 11 px marker label, and the height of its line.
+const LABEL_CHAR_W: f64 = 6.6;
+const LABEL_H: f64 = 13.0;
+/// Lines a marker label may move down (or up) to avoid another.
+const MAX_LABEL_MOVES: usize = 6;
 
 /// Height of the shared legend strip under the panels.
 const LEGEND_H: f64 = 28.0;
@@ -445,6 +483,56 @@ pub fn marker_centres(svg: &str) -> Vec<(f64, f64)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn labels_of_close_markers_do_not_overlap() {
+        let mk = |label: &str, x: f64, y: f64| Marker {
+            label: label.into(),
+            x,
+            y,
+            colour: 0,
+        };
+        let p = Panel {
+            title: "t".into(),
+            x_label: "x".into(),
+            y_label: "y".into(),
+            markers: vec![
+                mk("xgaussian", 10.0, 42.24),
+                mk("unispine", 10.2, 42.26),
+                mk("3dgs", 10.1, 42.25),
+                mk("far", 90.0, 30.0),
+            ],
+            ..Default::default()
+        };
+        let svg = figure(&[p]);
+        let boxes: Vec<[f64; 4]> = svg
+            .lines()
+            .filter(|l| l.contains("marker-label"))
+            .map(|l| {
+                let a = |k: &str| -> f64 {
+                    let i = l.find(k).unwrap() + k.len();
+                    l[i..].split('"').next().unwrap().parse().unwrap()
+                };
+                let text = l.split('>').nth(1).unwrap().split('<').next().unwrap();
+                let tw = LABEL_CHAR_W * text.chars().count() as f64;
+                let x = if l.contains("\"end\"") {
+                    a("x=\"") - tw
+                } else {
+                    a("x=\"")
+                };
+                let y = a("y=\"");
+                [x, y - LABEL_H + 2.0, x + tw, y + 2.0]
+            })
+            .collect();
+        assert_eq!(boxes.len(), 4);
+        for i in 0..4 {
+            for j in 0..i {
+                let (a, b) = (boxes[i], boxes[j]);
+                let overlap = a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3];
+                assert!(!overlap, "labels {i} and {j} overlap: {a:?} {b:?}");
+            }
+        }
+    }
 
     #[test]
     fn ticks_are_nice_and_inside() {

@@ -36,6 +36,10 @@ pub struct Row {
     pub train_time_s: Option<f64>,
     pub fps: Option<f64>,
     pub n_gaussians: Option<usize>,
+    /// A compacting cell: Gaussians and test PSNR of its model before pruning (the unbounded
+    /// model: bit-identical to a plain run's).
+    pub unbounded_n: Option<usize>,
+    pub unbounded_psnr: Option<f64>,
     pub peak_memory_mib: Option<f64>,
     /// Wall time of the child process (start-up, data load, training, final evaluation).
     pub wall_s: Option<f64>,
@@ -123,6 +127,16 @@ fn read_row(plan: &Plan, out: &Path, c: &Cell) -> Row {
             .and_then(|m| m.get("n_gaussians"))
             .and_then(|x| x.as_u64())
             .map(|x| x as usize)
+            .filter(|_| ok),
+        unbounded_n: m
+            .and_then(|m| m.get("compaction"))
+            .and_then(|c| c.get("n_before"))
+            .and_then(|x| x.as_u64())
+            .map(|x| x as usize)
+            .filter(|_| ok),
+        unbounded_psnr: m
+            .and_then(|m| m.get("compaction"))
+            .and_then(|c| num(c, "psnr_before"))
             .filter(|_| ok),
         peak_memory_mib: m
             .and_then(|m| num(m, "peak_memory_bytes"))
@@ -510,6 +524,7 @@ pub fn tables_md(
         "- per row (results.csv): version, git commit, dataset checksum, config hash, CPU, \
          cores, SIMD path, threads"
     );
+    s.push_str(&super::compactness::section(rows));
     if !extra.is_empty() {
         s.push('\n');
         s.push_str(extra);

@@ -7,6 +7,7 @@
 //! claims as paired differences with 95 % intervals) -> `tables.md`.
 
 pub mod aggregate;
+pub mod compactness;
 pub mod plan;
 pub mod provenance;
 pub mod run;

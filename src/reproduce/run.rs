@@ -12,7 +12,7 @@
 //!   others go on.
 //! - The library never prints: progress leaves as [`RunEvent`]s.
 
-use std::io::Read;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::mpsc;
@@ -147,8 +147,8 @@ pub struct ReadyDataset {
 pub enum Outcome {
     /// Finished earlier with the same key: kept.
     Kept,
-    /// Trained now.
-    Done { wall_s: f64 },
+    /// Trained now (`resumed`: continued from the checkpoint of a stopped run).
+    Done { wall_s: f64, resumed: bool },
     /// Failed (message), or its dataset is missing.
     Failed { error: String },
 }
@@ -352,10 +352,35 @@ fn run_cell(
         }
     };
     let key = cell_key(&args, &ds.checksum);
+    let mut resume_from = None;
     if let Some(r) = read_record(&dir) {
         if r.key == key && r.status == Status::Done && metrics_completed(&dir) {
             return Outcome::Kept;
         }
+        // A stopped run of the same cell (signal, preemption, or a harness killed while it
+        // ran): continue from its checkpoint with `train --resume` (same bits as a run that
+        // never stopped).
+        if r.key == key
+            && matches!(r.status, Status::Stopped | Status::Running)
+            && dir.join("checkpoint.bin").is_file()
+            && dir.join("config.json").is_file()
+            && !metrics_completed(&dir)
+        {
+            resume_from = Some(r.wall_s);
+        }
+    }
+    if let Some(before) = resume_from {
+        return train_cell(
+            cell,
+            &dir,
+            &args,
+            key,
+            ds,
+            opts,
+            threads,
+            machine,
+            Some(before),
+        );
     }
     if dir.exists() {
         if let Err(e) = std::fs::remove_dir_all(&dir) {
@@ -365,6 +390,27 @@ fn run_cell(
     if let Err(e) = std::fs::create_dir_all(&dir) {
         return fail(format!("{}: {e}", dir.display()));
     }
+    train_cell(cell, &dir, &args, key, ds, opts, threads, machine, None)
+}
+
+/// Train a cell into `dir`: from scratch, or (`resumed`: the wall time of the earlier
+/// sessions) with `train --resume`, appending to `train.log` after a line saying so.
+#[allow(clippy::too_many_arguments)]
+fn train_cell(
+    cell: &Cell,
+    dir: &Path,
+    args: &[String],
+    key: String,
+    ds: &ReadyDataset,
+    opts: &RunOptions,
+    threads: usize,
+    machine: &Machine,
+    resumed: Option<f64>,
+) -> Outcome {
+    let _ = cell;
+    let fail = |error: String| Outcome::Failed { error };
+    let dir = dir.to_path_buf();
+    let args = args.to_vec();
     let mut rec = CellRecord {
         key,
         status: Status::Running,
@@ -380,23 +426,37 @@ fn run_cell(
     }
     let log = dir.join("train.log");
     let t0 = Instant::now();
-    let status = std::fs::File::create(&log).and_then(|f| {
-        Command::new(&opts.bin)
-            .arg("train")
-            .arg("--data")
-            .arg(&ds.dir)
-            .arg("--out")
-            .arg(&dir)
-            .arg("--threads")
-            .arg(threads.to_string())
-            .args(&args)
-            .env("RAYON_NUM_THREADS", threads.to_string())
+    let open = || -> std::io::Result<std::fs::File> {
+        match resumed {
+            None => std::fs::File::create(&log),
+            Some(_) => {
+                let mut f = std::fs::OpenOptions::new()
+                    .create(true)
+                    .append(true)
+                    .open(&log)?;
+                writeln!(f, "harness: resumed from the checkpoint of the stopped run")?;
+                Ok(f)
+            }
+        }
+    };
+    let status = open().and_then(|f| {
+        let mut cmd = Command::new(&opts.bin);
+        cmd.arg("train");
+        match resumed {
+            None => cmd.arg("--data").arg(&ds.dir).arg("--out").arg(&dir),
+            Some(_) => cmd.arg("--resume").arg(&dir).arg("--data").arg(&ds.dir),
+        };
+        cmd.arg("--threads").arg(threads.to_string());
+        if resumed.is_none() {
+            cmd.args(&args);
+        }
+        cmd.env("RAYON_NUM_THREADS", threads.to_string())
             .stdout(Stdio::from(f.try_clone()?))
             .stderr(Stdio::from(f))
             .stdin(Stdio::null())
             .status()
     });
-    rec.wall_s = t0.elapsed().as_secs_f64();
+    rec.wall_s = t0.elapsed().as_secs_f64() + resumed.unwrap_or(0.0);
     let outcome = match status {
         Err(e) => {
             rec.status = Status::Failed;
@@ -405,7 +465,10 @@ fn run_cell(
         }
         Ok(s) if s.success() && metrics_completed(&dir) => {
             rec.status = Status::Done;
-            Outcome::Done { wall_s: rec.wall_s }
+            Outcome::Done {
+                wall_s: rec.wall_s,
+                resumed: resumed.is_some(),
+            }
         }
         Ok(s) => {
             let stopped = s.success() || s.code() == Some(143);
@@ -539,7 +602,7 @@ pub fn run_plan(
             ended += 1;
             match &outcome {
                 Outcome::Kept => summary.kept += 1,
-                Outcome::Done { wall_s } => {
+                Outcome::Done { wall_s, .. } => {
                     summary.trained += 1;
                     trained += 1;
                     trained_wall += wall_s;

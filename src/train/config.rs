@@ -183,6 +183,9 @@ pub struct TrainConfig {
     pub preview_views: usize,
     /// Write a checkpoint every this many iterations (0 = only at the end / on stop).
     pub checkpoint_every: usize,
+    /// Compaction after the main schedule (not in the paper; off by default).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compact: Option<super::compact::CompactConfig>,
 }
 
 fn one() -> f64 {
@@ -238,6 +241,7 @@ impl TrainConfig {
             train_views: Some(50),
             preview_views: 4,
             checkpoint_every: 1000,
+            compact: None,
         }
     }
 
@@ -263,15 +267,30 @@ impl TrainConfig {
         self.checkpoint_every = s(self.checkpoint_every);
     }
 
-    /// Evaluation iterations within the run, sorted, with the last iteration included.
+    /// Iterations of the whole run: `iterations`, plus the fine-tuning after a compaction.
+    pub fn total_iterations(&self) -> usize {
+        self.iterations + self.compact.as_ref().map_or(0, |c| c.finetune)
+    }
+
+    /// The iteration whose update a compaction replaces (`None`: no compaction).
+    pub fn compact_at(&self) -> Option<usize> {
+        self.compact
+            .as_ref()
+            .map(|c| c.at_iteration(self.iterations))
+    }
+
+    /// Evaluation iterations within the run, sorted, with the last iteration (and the
+    /// compaction iteration) included.
     pub fn eval_points(&self) -> Vec<usize> {
+        let total = self.total_iterations();
         let mut v: Vec<usize> = self
             .eval_iterations
             .iter()
             .cloned()
-            .filter(|&x| x >= 1 && x <= self.iterations)
+            .filter(|&x| x >= 1 && x <= total)
             .collect();
-        v.push(self.iterations);
+        v.extend(self.compact_at());
+        v.push(total);
         v.sort_unstable();
         v.dedup();
         v
@@ -280,8 +299,9 @@ impl TrainConfig {
     /// Whether the test views are evaluated after (1-based) iteration `it`: the same set as
     /// [`TrainConfig::eval_points`], without building it.
     pub fn is_eval_point(&self, it: usize) -> bool {
-        (1..=self.iterations).contains(&it)
-            && (it == self.iterations || self.eval_iterations.contains(&it))
+        let total = self.total_iterations();
+        (1..=total).contains(&it)
+            && (it == total || self.compact_at() == Some(it) || self.eval_iterations.contains(&it))
     }
 
     /// Number of active features at (1-based) iteration `it`: 1, then one more SH band at every
@@ -297,7 +317,11 @@ impl TrainConfig {
     /// Check values a run cannot work with, before iteration 1; the error names the field and
     /// gives its allowed range (the ranges are declared with the flags in [`super::settings`]).
     pub fn validate(&self) -> Result<()> {
-        super::settings::check_ranges(self)
+        super::settings::check_ranges(self)?;
+        if let Some(c) = &self.compact {
+            c.validate(self.iterations)?;
+        }
+        Ok(())
     }
 
     /// Read a config JSON.

@@ -28,8 +28,13 @@
 //! view (no Gaussian visible) and when every Gaussian is more than [`LEAVE_FACTOR`] scene
 //! extents from the volume centre.
 //!
+//! Compaction ([`compact`], optional, not in the paper) replaces the update of its iteration
+//! (default: the last of `iterations`) with a prune by importance; `finetune` more iterations
+//! follow without densification, statistics or opacity resets.
+//!
 //! The loop with its events and files is [`session`]; the run folder is [`run_dir`].
 
+pub mod compact;
 pub mod config;
 pub mod event;
 pub mod run_dir;
@@ -116,6 +121,8 @@ pub struct Trainer<'a> {
     pub extent: f64,
     /// Last completed iteration.
     pub iteration: usize,
+    /// What the compaction did, once it has run.
+    pub compaction: Option<compact::Compaction>,
     stack: Vec<usize>,
     rng: ChaCha8Rng,
 }
@@ -158,6 +165,7 @@ impl<'a> Trainer<'a> {
             priors,
             extent,
             iteration: 0,
+            compaction: None,
             stack: Vec::new(),
         })
     }
@@ -196,12 +204,27 @@ impl<'a> Trainer<'a> {
 
     /// Continue from a checkpoint of a run with the same config and dataset.
     pub fn restore(&mut self, c: &Checkpoint) -> Result<()> {
-        if c.iteration > self.cfg.iterations {
+        let total = self.cfg.total_iterations();
+        if c.iteration > total {
             return Err(Error::invalid(
                 "checkpoint.iteration",
+                format!("{} is beyond the config's {total} iterations", c.iteration),
+            ));
+        }
+        let compacted = self.cfg.compact_at().is_some_and(|a| c.iteration >= a);
+        if compacted != c.compaction.is_some() {
+            return Err(Error::invalid(
+                "checkpoint.compaction",
                 format!(
-                    "{} is beyond the config's {} iterations",
-                    c.iteration, self.cfg.iterations
+                    "the checkpoint at iteration {} {} a compaction record but the config \
+                     compacts at {:?}",
+                    c.iteration,
+                    if c.compaction.is_some() {
+                        "has"
+                    } else {
+                        "lacks"
+                    },
+                    self.cfg.compact_at()
                 ),
             ));
         }
@@ -223,7 +246,46 @@ impl<'a> Trainer<'a> {
         self.rng.set_word_pos(c.rng_word_pos);
         self.stack = c.view_stack.clone();
         self.iteration = c.iteration;
+        self.compaction = c.compaction.clone();
         Ok(())
+    }
+
+    /// Prune to the compaction target by importance over the training views (see
+    /// [`compact`]); `before` is the test evaluation of the model before pruning. Returns the
+    /// evaluation of the pruned model.
+    fn compact(&mut self, it: usize, before: &StepEval) -> Result<StepEval> {
+        let c = self
+            .cfg
+            .compact
+            .clone()
+            .expect("called with a compaction config");
+        let settings = self.settings(it);
+        let cams: Vec<_> = (0..self.targets.len())
+            .map(|k| self.ds.train_camera(k))
+            .collect();
+        let score = compact::importance(&self.state.params, &cams, &settings)?;
+        let n = self.state.len();
+        let keep = compact::keep_indices(&score, c.target(n));
+        let src: Vec<_> = keep.into_iter().map(crate::densify::Source::Keep).collect();
+        self.state.remap(&src);
+        let te = Instant::now();
+        let result = eval::evaluate(&self.state.params, self.ds, &self.test_targets, &settings)?;
+        let after = StepEval {
+            result,
+            n_gaussians: self.state.len(),
+            seconds: te.elapsed().as_secs_f64(),
+        };
+        self.compaction = Some(compact::Compaction {
+            iteration: it,
+            n_before: n,
+            n_after: after.n_gaussians,
+            psnr_before: before.result.psnr,
+            ssim_before: before.result.ssim,
+            psnr_pruned: after.result.psnr,
+            ssim_pruned: after.result.ssim,
+            score: compact::SCORE_NAME.to_string(),
+        });
+        Ok(after)
     }
 
     fn next_view(&mut self) -> usize {
@@ -288,12 +350,25 @@ impl<'a> Trainer<'a> {
             None
         };
         let d = &cfg.densify;
-        let last = it == cfg.iterations;
+        let last = it == cfg.total_iterations();
         let mut active = [!last; N_GROUPS];
         let mut densified = None;
+        let compact_at = cfg.compact_at();
+        let mut eval = eval;
         // Nothing changes the model at the last iteration: what was evaluated above is what is
         // saved (upstream saves its model before that iteration's densification too).
-        if d.collects(it) && !last {
+        if compact_at == Some(it) {
+            // The compaction replaces this iteration's update: the model pruned is the one
+            // just evaluated (at the default iteration, the model a plain run saves). Its evaluation goes to
+            // the compaction record; the pruned model's is this iteration's evaluation.
+            let before = eval
+                .take()
+                .expect("the compaction iteration is an eval point");
+            let mut after = self.compact(it, &before)?;
+            after.seconds += before.seconds;
+            eval = Some(after);
+            active = [false; N_GROUPS];
+        } else if d.collects(it) && !last && compact_at.is_none_or(|a| it < a) {
             self.state.accumulate(&grads.mean2d_ndc_norm, &grads.radius);
             if d.densifies(it) {
                 let seed = cfg.seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ it as u64;

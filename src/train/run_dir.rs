@@ -29,6 +29,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
+use super::compact::Compaction;
 use crate::densify::{Stats, TrainState};
 use crate::error::{Error, Result};
 use crate::fsio;
@@ -117,6 +118,11 @@ pub struct Metrics {
     pub render: RenderSettings,
     /// rayon threads of the run.
     pub threads: usize,
+    /// The compaction (Gaussians and test PSNR before and after pruning), when the run
+    /// compacted; `n_gaussians` and `test_psnr` are then those of the compacted, fine-tuned,
+    /// saved model.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compaction: Option<Compaction>,
 }
 
 /// Everything a resumed run needs to continue with the same bits: parameters, Adam moments and
@@ -138,6 +144,8 @@ pub struct Checkpoint {
     pub eval_time_s: f64,
     /// `log.csv` up to `iteration`.
     pub log: String,
+    /// What the compaction did, once it has run.
+    pub compaction: Option<Compaction>,
 }
 
 const CKPT_MAGIC: &[u8] = b"unispine-checkpoint\n";
@@ -160,6 +168,8 @@ struct CkptHeader {
     train_time_s: f64,
     eval_time_s: f64,
     log_bytes: usize,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    compaction: Option<Compaction>,
 }
 
 fn put_g(buf: &mut Vec<u8>, g: &Gaussians<f32>) {
@@ -211,6 +221,7 @@ impl Checkpoint {
             train_time_s: self.train_time_s,
             eval_time_s: self.eval_time_s,
             log_bytes: self.log.len(),
+            compaction: self.compaction.clone(),
         };
         let hj = serde_json::to_vec(&h).expect("checkpoint header serialises");
         let mut buf =
@@ -327,6 +338,7 @@ impl Checkpoint {
             },
             rng_word_pos,
             view_stack: h.view_stack,
+            compaction: h.compaction,
             evals: h.evals,
             train_time_s: h.train_time_s,
             eval_time_s: h.eval_time_s,
@@ -403,6 +415,28 @@ impl RunDir {
     /// Read `config.json` as `T`.
     pub fn read_config<T: DeserializeOwned>(&self) -> Result<T> {
         self.read_json(CONFIG, "config")
+    }
+
+    /// An error when the folder holds a baseline run (`unispine train --method fdk | naf | ...`,
+    /// recognised by its `config.json`): only Gaussian runs have a checkpoint to resume from.
+    pub fn check_resumable(&self) -> Result<()> {
+        let v: serde_json::Value = self.read_json(CONFIG, "config")?;
+        let baseline = match (v.get("preset"), v.get("method")) {
+            (Some(p), _) => p.as_str().map(str::to_string),
+            (None, Some(m)) if m == "fdk" => Some("fdk".to_string()),
+            _ => None,
+        };
+        match baseline {
+            Some(name) => Err(Error::invalid(
+                "--resume",
+                format!(
+                    "{} holds a `{name}` baseline run: baseline runs cannot be resumed (train \
+                     it again with `unispine train --method {name}`)",
+                    self.root.display()
+                ),
+            )),
+            None => Ok(()),
+        }
     }
 
     /// The dataset folder recorded in `config.json` (`data`): absolute as written by `train`;
@@ -575,6 +609,7 @@ mod tests {
             train_time_s: 1.5,
             eval_time_s: 0.25,
             log: format!("{LOG_HEADER}1,0,1,1,1,1,3,0.1\n"),
+            compaction: None,
         };
         let p = Path::new("c.bin");
         let b = c.to_bytes();

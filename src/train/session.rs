@@ -98,6 +98,7 @@ pub fn resume(
     on_event: &mut dyn FnMut(&Event),
 ) -> Result<Metrics> {
     let rd = RunDir::open(dir)?;
+    rd.check_resumable()?;
     let cfg: TrainConfig = rd.read_config()?;
     let c = rd.read_checkpoint()?;
     let mut tr = Trainer::new(cfg, ds)?;
@@ -125,6 +126,7 @@ impl Session<'_> {
             train_time_s,
             eval_time_s: self.eval_time_s,
             log: self.log.clone(),
+            compaction: self.tr.compaction.clone(),
         }
     }
 }
@@ -138,7 +140,7 @@ fn drive(
     let cfg = s.tr.cfg.clone();
     let ds = s.tr.ds;
     on_event(&Event::Started {
-        total: cfg.iterations,
+        total: cfg.total_iterations(),
         n_gaussians: s.tr.state.len(),
         train_views: s.tr.targets.len(),
         test_views: s.tr.test_targets.len(),
@@ -150,7 +152,8 @@ fn drive(
     let (mut win_t, mut win_it) = (Instant::now(), 0usize);
     let mut its_per_sec = 0.0;
     let mut completed = true;
-    while s.tr.iteration < cfg.iterations {
+    let total = cfg.total_iterations();
+    while s.tr.iteration < total {
         let asked = ctl.stop.load(Ordering::SeqCst);
         if asked || ctl.stop_after.is_some_and(|k| s.tr.iteration >= k) {
             completed = false;
@@ -212,17 +215,14 @@ fn drive(
         }
         on_event(&Event::Progress {
             iteration: it,
-            total: cfg.iterations,
+            total,
             loss: info.loss.total,
             psnr: info.psnr,
             n_gaussians: info.n_gaussians,
             its_per_sec,
         });
         if let Some(d) = dir {
-            if cfg.checkpoint_every > 0
-                && it.is_multiple_of(cfg.checkpoint_every)
-                && it < cfg.iterations
-            {
+            if cfg.checkpoint_every > 0 && it.is_multiple_of(cfg.checkpoint_every) && it < total {
                 d.write_checkpoint(&s.checkpoint(elapsed()))?;
                 d.write_log(&s.log)?;
                 on_event(&Event::Checkpoint { iteration: it });
@@ -277,6 +277,7 @@ fn drive(
         extent: s.tr.extent,
         render: settings,
         threads: rayon::current_num_threads(),
+        compaction: s.tr.compaction.clone(),
     };
     if let Some(d) = dir {
         d.write_metrics(&metrics)?;

@@ -32,6 +32,7 @@
 
 use std::path::PathBuf;
 
+use super::compact::CompactConfig;
 use super::config::{Method, TrainConfig};
 use crate::error::{Error, Result};
 use crate::gaussians::init::InitKind;
@@ -319,6 +320,35 @@ settings! {
         /// Number of test views saved as PNG beside the ground truth.
         preview_views: usize => |c, v| c.preview_views = v
     );
+    // Compaction (see `super::compact`): keep and to replace the config's pair (giving both is
+    // refused in `apply`); the section's own checks run in `CompactConfig::validate`.
+    "compact.keep" flag(
+        /// Compaction: keep this fraction (0, 1] of the Gaussians, ranked by their alpha*T over
+        /// the training views.
+        compact_keep: f64 => |c, v| {
+            let k = c.compact.get_or_insert_with(CompactConfig::default);
+            k.keep = Some(v);
+            k.to = None;
+        }
+    );
+    "compact.to" flag(
+        /// Compaction: keep at most this many Gaussians (a budget >= 1).
+        compact_to: usize => |c, v| {
+            let k = c.compact.get_or_insert_with(CompactConfig::default);
+            k.to = Some(v);
+            k.keep = None;
+        }
+    );
+    "compact.at" flag(
+        /// Compaction: replace the update of this iteration (default: the last of --iters).
+        compact_at: usize => |c, v| c.compact.get_or_insert_with(CompactConfig::default).at = Some(v)
+    );
+    "compact.finetune" flag(
+        /// Compaction: fine-tune this many iterations after --iters, without densification.
+        compact_finetune: usize => |c, v| {
+            c.compact.get_or_insert_with(CompactConfig::default).finetune = v
+        }
+    );
 }
 
 impl TrainOverrides {
@@ -342,9 +372,36 @@ impl TrainOverrides {
             }
             c.compress_schedule();
         }
+        self.check_compact_flags(&c)?;
         self.set_flags(&mut c);
         c.validate()?;
         Ok(c)
+    }
+
+    /// `--compact-keep` and `--compact-to` exclude each other; `--compact-at` and
+    /// `--compact-finetune` need a compaction, from a size flag or the config.
+    fn check_compact_flags(&self, c: &TrainConfig) -> Result<()> {
+        if self.compact_keep.is_some() && self.compact_to.is_some() {
+            return Err(Error::invalid(
+                "--compact-keep / --compact-to (compact.keep, compact.to)",
+                "give one of the two: a fraction to keep or a Gaussian budget",
+            ));
+        }
+        let size = self.compact_keep.is_some() || self.compact_to.is_some();
+        if !size && c.compact.is_none() {
+            for (flag, given) in [
+                ("--compact-at", self.compact_at.is_some()),
+                ("--compact-finetune", self.compact_finetune.is_some()),
+            ] {
+                if given {
+                    return Err(Error::invalid(
+                        flag,
+                        "needs a compaction: give --compact-keep FRACTION or --compact-to N",
+                    ));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The `unispine train` flags these overrides parse (`--config`, one per setting,
@@ -367,7 +424,15 @@ mod tests {
         fields.dedup();
         assert_eq!(fields.len(), n, "a field declared twice");
         // Every declared field is a real config.json path.
-        let v = serde_json::to_value(TrainConfig::preset(Method::Unispine)).unwrap();
+        // (with every optional section present, so its fields are in the JSON)
+        let mut c = TrainConfig::preset(Method::Unispine);
+        c.compact = Some(CompactConfig {
+            keep: Some(0.5),
+            to: Some(1),
+            at: Some(1),
+            finetune: 1,
+        });
+        let v = serde_json::to_value(c).unwrap();
         for field in &d {
             let mut at = &v;
             for part in field.split('.') {
@@ -406,6 +471,10 @@ mod tests {
                 "train-views",
                 "checkpoint-every",
                 "preview-views",
+                "compact-keep",
+                "compact-to",
+                "compact-at",
+                "compact-finetune",
                 "compress-schedule",
             ]
         );

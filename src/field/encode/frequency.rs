@@ -31,3 +31,19 @@ impl Frequency {
         }
     }
 }
+
+impl Frequency {
+    /// `d (g . encode(x)) / d x`: `g_x + sum_k 2^k (g_sin cos(2^k x) - g_cos sin(2^k x))`.
+    pub fn input_vjp<R: Real>(&self, x: [R; 3], g: &[R]) -> [R; 3] {
+        let mut out = [g[0], g[1], g[2]];
+        for k in 0..self.bands {
+            let f = R::c((1u64 << k) as f64);
+            let o = 3 + 6 * k;
+            for d in 0..3 {
+                let (s, c) = (x[d] * f).sin_cos();
+                out[d] += f * (g[o + d] * c - g[o + 3 + d] * s);
+            }
+        }
+        out
+    }
+}

@@ -83,27 +83,47 @@ impl HashGrid {
             f[d] = p - pf;
         }
         let dense = (r + 1).pow(3) <= size;
+        // Per axis, the two corner coordinates' index terms and weights (`1 - f`, `f`); each
+        // corner's weight is `((1 x w_x) x w_y) x w_z` and its index combines one term per
+        // axis, as torch-ngp (integer terms: exact in any order).
+        let mut wd = [[R::zero(); 2]; 3];
+        let mut term = [[0u64; 2]; 3];
+        let stride = [1, r + 1, (r + 1) * (r + 1)];
+        for d in 0..3 {
+            wd[d] = [R::one() - f[d], f[d]];
+            for (s, t) in term[d].iter_mut().enumerate() {
+                let p = g[d] + s as u32;
+                *t = if dense {
+                    p as u64 * stride[d]
+                } else {
+                    p.wrapping_mul(PRIMES[d]) as u64
+                };
+            }
+        }
         let mut idx = [0usize; 8];
         let mut w = [R::one(); 8];
         for c in 0..8 {
-            let mut p = [0u32; 3];
-            for d in 0..3 {
-                if c & (1 << d) == 0 {
-                    w[c] *= R::one() - f[d];
-                    p[d] = g[d];
-                } else {
-                    w[c] *= f[d];
-                    p[d] = g[d] + 1;
-                }
-            }
+            let (sx, sy, sz) = (c & 1, (c >> 1) & 1, (c >> 2) & 1);
+            w[c] = R::one() * wd[0][sx] * wd[1][sy] * wd[2][sz];
+            // torch-ngp takes the index modulo the level size. A dense index is already below
+            // it (corners lie in 0..=R, so the index is below (R + 1)^3 <= size), and a hashed
+            // level has size T, a power of two: the modulo is a mask (same result, no division).
             let i = if dense {
-                p[0] as u64 + (r + 1) * (p[1] as u64 + (r + 1) * p[2] as u64)
+                let i = term[0][sx] + term[1][sy] + term[2][sz];
+                if i < size {
+                    i
+                } else {
+                    i % size
+                }
             } else {
-                (p[0].wrapping_mul(PRIMES[0])
-                    ^ p[1].wrapping_mul(PRIMES[1])
-                    ^ p[2].wrapping_mul(PRIMES[2])) as u64
+                let h = (term[0][sx] as u32 ^ term[1][sy] as u32 ^ term[2][sz] as u32) as u64;
+                if size.is_power_of_two() {
+                    h & (size - 1)
+                } else {
+                    h % size
+                }
             };
-            idx[c] = (i % size) as usize;
+            idx[c] = i as usize;
         }
         (idx, w)
     }

@@ -1,12 +1,19 @@
-//! Point encoders of the neural attenuation fields: frequency (IntraTomo, NeRF) and the
-//! multiresolution hash grid (NAF). Each maps a point in metres to a feature vector; the hash
-//! grid has parameters and a backward pass.
+//! Point encoders of the neural attenuation fields: frequency (IntraTomo, NeRF), the
+//! multiresolution hash grid (NAF), TensoRF's vector-matrix decomposition and a dense grid (the
+//! test oracle of the two grid encoders). Each maps a point in metres to a feature vector; all
+//! but the frequency encoding have parameters and a backward pass. `input_vjp` gives the
+//! gradient with respect to the point (an audit quantity: upstream never differentiates the
+//! sample positions).
 
+pub mod dense_grid;
 pub mod frequency;
 pub mod hash_grid;
+pub mod tensor_vm;
 
+pub use dense_grid::{DenseGrid, GridMap};
 pub use frequency::Frequency;
 pub use hash_grid::HashGrid;
+pub use tensor_vm::{TensorVm, VmLines};
 
 use crate::real::Real;
 
@@ -15,6 +22,8 @@ use crate::real::Real;
 pub enum Encoder {
     Frequency(Frequency),
     HashGrid(HashGrid),
+    TensorVm(TensorVm),
+    DenseGrid(DenseGrid),
 }
 
 impl Encoder {
@@ -23,6 +32,8 @@ impl Encoder {
         match self {
             Encoder::Frequency(f) => f.out_dim(),
             Encoder::HashGrid(h) => h.out_dim(),
+            Encoder::TensorVm(v) => v.out_dim(),
+            Encoder::DenseGrid(d) => d.out_dim(),
         }
     }
 
@@ -31,6 +42,8 @@ impl Encoder {
         match self {
             Encoder::Frequency(_) => 0,
             Encoder::HashGrid(h) => h.n_params(),
+            Encoder::TensorVm(v) => v.n_params(),
+            Encoder::DenseGrid(d) => d.n_params(),
         }
     }
 
@@ -40,21 +53,68 @@ impl Encoder {
         match self {
             Encoder::Frequency(f) => f.encode(x, out),
             Encoder::HashGrid(h) => h.encode(params, x, out),
+            Encoder::TensorVm(v) => v.encode(params, x, out),
+            Encoder::DenseGrid(d) => d.encode(params, x, out),
         }
     }
 
-    /// Accumulate the parameter gradient (see [`HashGrid::backward`]); nothing for encoders
-    /// without parameters.
+    /// Accumulate the parameter gradient of `sum_n g_n . encode(x_n)`, with
+    /// `g_out[n * g_stride + g_off ..]` the gradient of point `n`'s encoding (see
+    /// [`HashGrid::backward`]); nothing for encoders without parameters. Bit-identical for any
+    /// thread count.
     pub fn backward<R: Real>(
         &self,
+        params: &[R],
         xs: &[[R; 3]],
         g_out: &[R],
         g_stride: usize,
         g_off: usize,
         grad: &mut [R],
     ) {
-        if let Encoder::HashGrid(h) = self {
-            h.backward(xs, g_out, g_stride, g_off, grad);
+        match self {
+            Encoder::Frequency(_) => {}
+            Encoder::HashGrid(h) => h.backward(xs, g_out, g_stride, g_off, grad),
+            Encoder::TensorVm(v) => v.backward(params, xs, g_out, g_stride, g_off, grad),
+            Encoder::DenseGrid(d) => d.backward(xs, g_out, g_stride, g_off, grad),
         }
     }
+
+    /// `d (g . encode(x)) / d x` for one point.
+    pub fn input_vjp<R: Real>(&self, params: &[R], x: [R; 3], g: &[R]) -> [R; 3] {
+        match self {
+            Encoder::Frequency(f) => f.input_vjp(x, g),
+            Encoder::HashGrid(h) => hash_input_vjp(h, params, x, g),
+            Encoder::TensorVm(v) => v.input_vjp(params, x, g),
+            Encoder::DenseGrid(d) => d.input_vjp(params, x, g),
+        }
+    }
+}
+
+/// `d (g . encode(x)) / d x` of the hash grid: per level, the trilinear weights' derivative at
+/// the level's position `u (R - 1) + 1/2` (the same arithmetic as [`HashGrid::corners`]).
+pub fn hash_input_vjp<R: Real>(h: &HashGrid, table: &[R], x: [R; 3], g: &[R]) -> [R; 3] {
+    let nf = h.features;
+    let b = R::c(h.bound);
+    let mut out = [R::zero(); 3];
+    for l in 0..h.levels {
+        let (idx, _) = h.corners(x, l);
+        let scale = R::c((h.base << l) as f64 - 1.0);
+        let mut f = [R::zero(); 3];
+        for d in 0..3 {
+            let p = (x[d] + b) / (b + b) * scale + R::c(0.5);
+            f[d] = p - p.floor();
+        }
+        let mut vals = [R::zero(); 8];
+        for c in 0..8 {
+            for ch in 0..nf {
+                vals[c] += g[l * nf + ch] * table[(h.offsets[l] + idx[c]) * nf + ch];
+            }
+        }
+        let dp = scale / (b + b);
+        let gl = dense_grid::trilinear_grad(&vals, f, [dp; 3]);
+        for d in 0..3 {
+            out[d] += gl[d];
+        }
+    }
+    out
 }

@@ -1,6 +1,6 @@
 //! Reproduction plans: a TOML file naming datasets x methods x seeds with one schedule, parsed
 //! with line-numbered errors, plus the built-in plans (`quick`, `table2`, `table1`, `stability`,
-//! `compactness` and their `-full` twins).
+//! `compactness`, `budgets` and their `-full` twins).
 //!
 //! Schema (every key but the marked ones is optional):
 //!
@@ -532,7 +532,7 @@ impl Plan {
 }
 
 /// The built-in plans: name and TOML text.
-pub const BUILTIN: [(&str, &str); 10] = [
+pub const BUILTIN: [(&str, &str); 12] = [
     ("quick", include_str!("../plans/quick.toml")),
     ("table2", include_str!("../plans/table2.toml")),
     ("table2-full", include_str!("../plans/table2-full.toml")),
@@ -548,6 +548,8 @@ pub const BUILTIN: [(&str, &str); 10] = [
         "compactness-full",
         include_str!("../plans/compactness-full.toml"),
     ),
+    ("budgets", include_str!("../plans/budgets.toml")),
+    ("budgets-full", include_str!("../plans/budgets-full.toml")),
     ("quick-full", include_str!("../plans/quick-full.toml")),
 ];
 
