@@ -2,8 +2,8 @@
 //!
 //! The paper treats a 3D ultrasound volume as a scalar field and projects it with the same DRR
 //! operator as a CT. For a spine without a real ultrasound volume we synthesise such a field
-//! from labels (recipe 1 of the project's data research, after Ultra-NeRF's ray model and
-//! Wein et al. 2008):
+//! from labels (after Ultra-NeRF's ray model, magdalena-wysocki/ultra-nerf `run_ultra_nerf.py`,
+//! with CT-derived reflection as in Wein et al. 2008):
 //!
 //! 1. each label gets an acoustic impedance Z (MRayl), an attenuation alpha (dB/(cm MHz)) and a
 //!    backscatter strength sigma ([`acoustic`]);
@@ -174,8 +174,8 @@ pub const SOFT: Acoustic = Acoustic {
     sigma: 0.5,
 };
 
-/// Acoustic properties of a label id (phantom ids and TotalSegmentator v2 ids). Values from the
-/// research table (recipe 1): PMC10346919 Table A2, PMC10001275 Table 4, typical soft tissue.
+/// Acoustic properties of a label id (phantom ids and TotalSegmentator v2 ids). Values from
+/// PMC10346919 Table A2, PMC10001275 Table 4 and typical soft-tissue values.
 /// Label 0 is the coupling medium (gel / water), not air: an air gap would reflect everything.
 /// TotalSegmentator bones (vertebrae 25-50, humerus .. hip 69-78, skull 91, ribs 92-115,
 /// sternum 116) are bone; costal cartilage 117 is cartilage; every other id is soft tissue.

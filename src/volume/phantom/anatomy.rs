@@ -3,8 +3,8 @@
 //! Every voxel is a pure function of its position and of this layout.
 //!
 //! Axes (world, mm): x = left-right, y = anterior -> posterior (+y is the back), z = inferior ->
-//! superior (+z is the head; image row 0 of every projection is +z). Shapes follow the recipe
-//! of the project's data research (section 4.1), in units of the anatomical scale `s`
+//! superior (+z is the head; image row 0 of every projection is +z). Shapes are our design
+//! (anatomical proportions, no upstream source), in units of the anatomical scale `s`
 //! (s = 1: adult lumbar size). Local vertebra coordinates: u (lateral), v (posterior) about the
 //! centre of the spinal canal, rotated by the vertebra's axial rotation.
 
