@@ -1,10 +1,11 @@
 //! Noise models of generated projections (off by default; seeded, deterministic).
 //!
-//! `poisson:I0[,SIGMA]` is TIGRE's `CTnoise.add` model, as NAF uses it: with `pmax` the largest noiseless line integral of the dataset,
-//! counts `N ~ Poisson(I0 exp(-p / pmax))` (+ Gaussian electronic noise of SIGMA counts), then
-//! `p' = -ln(max(N, 1e-6) / I0) * pmax`. Poisson variates are exact (Knuth) below a mean of 30
-//! and the normal approximation `round(lambda + sqrt(lambda) z)` above (hence "Poisson-like").
-//! `gaussian:S` adds N(0, (S * pmax)^2) to every pixel (S relative to the largest projection).
+//! `poisson:I0[,SIGMA]` is TIGRE's `CTnoise.add` model, as NAF uses it: with `pmax` the largest
+//! noiseless line integral of the dataset, counts `N ~ Poisson(I0 exp(-p / pmax))` (+ Gaussian
+//! electronic noise of SIGMA counts), then `p' = -ln(max(N, 1e-6) / I0) * pmax`. Poisson
+//! variates are exact (Knuth) below a mean of 30 and the normal approximation
+//! `round(lambda + sqrt(lambda) z)` above (hence "Poisson-like"). `gaussian:S` adds
+//! N(0, (S * pmax)^2) to every pixel (S relative to the largest projection).
 //!
 //! One ChaCha8 stream seeded from the dataset seed (mixed with a constant for this purpose),
 //! views and pixels in order: the same seed gives the same bits.

@@ -75,13 +75,13 @@ pub const T_MIN: f64 = 1e-4;
 /// Pixels per tile.
 const TP: usize = TILE * TILE;
 
-/// Floating-point operations (adds, multiplies, divisions, compares and min/selects on floats)
-/// per pixel lane of the forward kernel, counted from its source, without the ones that are
-/// the same for a whole tile row (hoisted out of the lane loop): dx and Eq. (4)'s exponent 8, `exp_f32`
-/// 24, opacity and clamp 2, transmittance 2, three tests 3, Eq. (5)'s colour 3.
+/// Floating-point operations (adds, multiplies, divisions, compares and min/selects on floats) per
+/// pixel lane of the forward kernel, counted from its source, without the ones that are the same
+/// for a whole tile row (hoisted out of the lane loop): dx and Eq. (4)'s exponent 8, `exp_f32` 24,
+/// opacity and clamp 2, transmittance 2, three tests 3, Eq. (5)'s colour 3.
 pub const FLOPS_PER_BLEND_FORWARD: u64 = 42;
-/// The same count for the backward kernel: dx, exponent, exp and alpha 34, three tests 3, T recovery 3,
-/// dL/dalpha 8, the two running sums 6, d(power) and the six gradient lanes 20.
+/// The same count for the backward kernel: dx, exponent, exp and alpha 34, three tests 3, T
+/// recovery 3, dL/dalpha 8, the two running sums 6, d(power) and the six gradient lanes 20.
 pub const FLOPS_PER_BLEND_BACKWARD: u64 = 74;
 
 /// What [`backward`](fn@backward) needs from [`forward`](fn@forward).
@@ -97,8 +97,8 @@ pub struct CompositeSaved<R: Real> {
     pub n_contrib: Vec<u32>,
     /// Number of (pixel, splat) blends performed (throughput statistics).
     pub blends: u64,
-    /// The tile work lists built by [`forward`](fn@forward), reused by [`backward`](fn@backward) (which rebuilds them
-    /// when this is empty, e.g. for a `Default` value).
+    /// The tile work lists built by [`forward`](fn@forward), reused by [`backward`](fn@backward)
+    /// (which rebuilds them when this is empty, e.g. for a `Default` value).
     pub work: WorkLists<R>,
 }
 

@@ -56,6 +56,9 @@ pub const MEMORY_FACTOR: usize = 16;
 /// See [`MEMORY_FACTOR`].
 pub const MEMORY_EXTRA: usize = 64 << 20;
 
+/// An object of the unpickler's arena: a finished value, a container of arena indices (filled
+/// in place, so memoised references see it complete), or a recognised global and the numpy
+/// objects under construction.
 #[derive(Clone, Debug)]
 enum Obj {
     Py(Py),
@@ -68,6 +71,8 @@ enum Obj {
     Moved,
 }
 
+/// The unpickler's state: the input and its read position, the object arena, stack, marks and
+/// memo, and the input limits' counters.
 struct Machine<'a> {
     b: &'a [u8],
     pos: usize,

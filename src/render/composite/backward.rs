@@ -18,8 +18,9 @@ use crate::simd::Simd;
 /// Gradient record of one work-list entry: (mean x, mean y, A, B, C, opacity, colour).
 pub(super) type Rec<R> = (u32, [R; 7]);
 
-/// The backward kernel of tile `t`, `W` pixels per lane vector (see [`forward_tile`](super::forward::forward_tile); both
-/// widths give the same bits: per column, the rows are summed in the same order).
+/// The backward kernel of tile `t`, `W` pixels per lane vector (see
+/// [`forward_tile`](super::forward::forward_tile); both widths give the same bits: per column, the
+/// rows are summed in the same order).
 #[inline(always)]
 pub(super) fn backward_tile<R: Real, const W: usize>(
     packed: &[Option<Packed<R>>],
@@ -153,9 +154,9 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
     recs
 }
 
-/// Vector-Jacobian product of [`forward`](fn@super::forward): the gradient of sum(d_image * image) with respect
-/// to the splat fields (mean2d in pixels, conic (A, B, C) with B the single off-diagonal
-/// parameter, opacity after the sigmoid, colour). Splats that are not drawn get 0.
+/// Vector-Jacobian product of [`forward`](fn@super::forward): the gradient of sum(d_image * image)
+/// with respect to the splat fields (mean2d in pixels, conic (A, B, C) with B the single
+/// off-diagonal parameter, opacity after the sigmoid, colour). Splats that are not drawn get 0.
 pub fn backward<R: Real>(
     splats: &Splats<R>,
     saved: &CompositeSaved<R>,
@@ -164,7 +165,8 @@ pub fn backward<R: Real>(
     backward_with(Simd::active(), splats, saved, d_image)
 }
 
-/// [`backward`] with the tile kernels compiled for `simd` (see [`forward_with`](super::forward_with)).
+/// [`backward`] with the tile kernels compiled for `simd` (see
+/// [`forward_with`](super::forward_with)).
 pub fn backward_with<R: Real>(
     simd: Simd,
     splats: &Splats<R>,

@@ -1,6 +1,6 @@
-//! The naive per-pixel reference of the compositor (Eqs. 4-5): no tile lists, no pixel boxes,
-//! no early tile exit, one pixel at a time. The tests compare [`super::forward`](fn@super::forward) with it bit for
-//! bit, and `unispine bench render` uses it as its per-blend baseline.
+//! The naive per-pixel reference of the compositor (Eqs. 4-5): no tile lists, no pixel boxes, no
+//! early tile exit, one pixel at a time. The tests compare [`super::forward`](fn@super::forward)
+//! with it bit for bit, and `unispine bench render` uses it as its per-blend baseline.
 
 use super::{ALPHA_MAX, ALPHA_MIN, T_MIN};
 use crate::image2d::Image2d;
@@ -9,10 +9,11 @@ use crate::render::lanes::{exp_k, power_of};
 use crate::render::tiles::{self, TILE};
 use crate::render::Splats;
 
-/// Naive reference of [`super::forward`](fn@super::forward) (no tile lists, no pixel boxes, no early tile exit): for every
-/// pixel, every drawn splat whose tile rectangle holds the pixel's tile, in (depth, index)
-/// order. Same arithmetic per pixel, so it agrees with [`super::forward`](fn@super::forward) bit for bit; used by the tests
-/// and as the per-blend baseline of `unispine bench render`. Single-threaded, O(pixels x splats).
+/// Naive reference of [`super::forward`](fn@super::forward) (no tile lists, no pixel boxes, no
+/// early tile exit): for every pixel, every drawn splat whose tile rectangle holds the pixel's
+/// tile, in (depth, index) order. Same arithmetic per pixel, so it agrees with
+/// [`super::forward`](fn@super::forward) bit for bit; used by the tests and as the per-blend
+/// baseline of `unispine bench render`. Single-threaded, O(pixels x splats).
 pub fn naive_forward<R: Real>(
     splats: &Splats<R>,
     width: usize,

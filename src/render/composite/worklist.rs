@@ -13,9 +13,10 @@ use crate::real::Real;
 /// Safety margin (in log space) of the per-splat pixel box.
 const BOX_LOG_MARGIN: f64 = 1e-3;
 
-/// Per tile, the prefix of its work list that [`backward`](fn@super::backward) visits: the entries up to the
-/// largest `n_contrib` of the tile's pixels (later entries blend nowhere in the tile). Built by
-/// [`forward`](fn@super::forward) from the splats it composited; [`backward`](fn@super::backward) must be given the same splats.
+/// Per tile, the prefix of its work list that [`backward`](fn@super::backward) visits: the entries
+/// up to the largest `n_contrib` of the tile's pixels (later entries blend nowhere in the tile).
+/// Built by [`forward`](fn@super::forward) from the splats it composited;
+/// [`backward`](fn@super::backward) must be given the same splats.
 #[derive(Clone, Debug, Default)]
 pub struct WorkLists<R> {
     pub(super) tiles: Vec<Vec<Entry<R>>>,
@@ -38,9 +39,9 @@ pub(super) struct Entry<R> {
     pub(super) y0: u32,
     pub(super) y1: u32,
     /// Bit `2 r + h`: the 8-column half `h` of tile row `r` (tile-local) may hold a pixel with
-    /// alpha >= 1/255 ([`halves`]). Set by [`forward_tile`](super::forward::forward_tile) for the rows it visits and read by
-    /// [`backward_tile`](super::backward::backward_tile), so the chord test (a square root and two divisions) runs once per
-    /// (tile, splat, row).
+    /// alpha >= 1/255 ([`halves`]). Set by [`forward_tile`](super::forward::forward_tile) for the
+    /// rows it visits and read by [`backward_tile`](super::backward::backward_tile), so the chord
+    /// test (a square root and two divisions) runs once per (tile, splat, row).
     pub(super) halves: u32,
 }
 
@@ -143,14 +144,14 @@ pub(super) fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Packed
         .collect()
 }
 
-/// The work list of tile `t`: its splats in depth order, each with the box of pixels where it
-/// can reach alpha >= 1/255 clipped to the tile. Entries that reach no pixel of the tile are
-/// dropped. [`backward`](fn@super::backward) reuses the prefix that [`forward_tile`](super::forward::forward_tile) kept, or rebuilds the list
-/// with this function.
+/// The work list of tile `t`: its splats in depth order, each with the box of pixels where it can
+/// reach alpha >= 1/255 clipped to the tile. Entries that reach no pixel of the tile are dropped.
+/// [`backward`](fn@super::backward) reuses the prefix that
+/// [`forward_tile`](super::forward::forward_tile) kept, or rebuilds the list with this function.
 ///
-/// `with_halves`: fill [`Entry::halves`] for every row of each box (what [`backward`](fn@super::backward) needs
-/// when it rebuilds the list); otherwise it is left 0 and [`forward_tile`](super::forward::forward_tile) fills it for the
-/// rows it visits.
+/// `with_halves`: fill [`Entry::halves`] for every row of each box (what
+/// [`backward`](fn@super::backward) needs when it rebuilds the list); otherwise it is left 0 and
+/// [`forward_tile`](super::forward::forward_tile) fills it for the rows it visits.
 pub(super) fn tile_entries<R: Real>(
     packed: &[Option<Packed<R>>],
     bins: &TileBins,
