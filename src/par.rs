@@ -33,6 +33,23 @@ pub fn det_sum_by<F: Fn(usize) -> f64 + Sync>(n: usize, f: F) -> f64 {
         .sum()
 }
 
+/// Check a count of parallel workers (`--jobs`, `--threads`): the allowed range is
+/// [1, 8 x the available cores]. More only costs memory (stacks, processes) and time: results
+/// never depend on it.
+pub fn check_workers(flag: &str, n: usize) -> crate::Result<()> {
+    let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+    if n == 0 || n > 8 * cores {
+        return Err(crate::Error::invalid(
+            flag,
+            format!(
+                "{n} is outside the allowed range [1, {}] (8 x the {cores} cores)",
+                8 * cores
+            ),
+        ));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -58,21 +75,4 @@ mod tests {
         assert!(bits.iter().skip(1).step_by(2).all(|b| *b == bits[1]));
         assert_eq!(bits[0], bits[1]);
     }
-}
-
-/// Check a count of parallel workers (`--jobs`, `--threads`): the allowed range is
-/// [1, 8 x the available cores]. More only costs memory (stacks, processes) and time: results
-/// never depend on it.
-pub fn check_workers(flag: &str, n: usize) -> crate::Result<()> {
-    let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
-    if n == 0 || n > 8 * cores {
-        return Err(crate::Error::invalid(
-            flag,
-            format!(
-                "{n} is outside the allowed range [1, {}] (8 x the {cores} cores)",
-                8 * cores
-            ),
-        ));
-    }
-    Ok(())
 }

@@ -1299,13 +1299,9 @@ fn nifti_every_spatial_unit_code_scales_voxels_and_affine_to_mm() {
         let want = file.map(|f| f as f64 * mm);
         assert_eq!(v.spacing, want, "xyzt_units {code}");
         let a = v.provenance.file_affine.unwrap();
-        for r in 0..3 {
-            for c in 0..4 {
-                assert_eq!(
-                    a[r][c],
-                    h.srow[r][c] as f64 * mm,
-                    "xyzt_units {code} [{r}][{c}]"
-                );
+        for (r, (row, srow)) in a.iter().zip(&h.srow).enumerate() {
+            for (c, (x, s)) in row.iter().zip(srow).enumerate() {
+                assert_eq!(*x, *s as f64 * mm, "xyzt_units {code} [{r}][{c}]");
             }
         }
         assert_ramp_i16(&v);
