@@ -412,18 +412,12 @@ pub fn check_view(cam: &Camera, box_: ([f64; 3], [f64; 3])) -> Result<()> {
     if (0..3).all(|a| c[a] >= lo[a] && c[a] <= hi[a]) {
         return Err(Error::Geometry(format!(
             "the source at ({:.3}, {:.3}, {:.3}) mm (view at {:.4} deg) lies inside the volume box \
-             [{:.3}, {:.3}] x [{:.3}, {:.3}] x [{:.3}, {:.3}] mm: increase DSO or move the volume \
-             (offOrigin)",
+             {}: increase DSO or move the volume (offOrigin)",
             c[0],
             c[1],
             c[2],
             angle.to_degrees(),
-            lo[0],
-            hi[0],
-            lo[1],
-            hi[1],
-            lo[2],
-            hi[2]
+            box_mm(lo, hi)
         )));
     }
     for corner in 0..8 {
@@ -444,6 +438,14 @@ pub fn check_view(cam: &Camera, box_: ([f64; 3], [f64; 3])) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// A world box as errors print it: `[x0, x1] x [y0, y1] x [z0, z1] mm`, 3 decimals.
+pub fn box_mm(lo: [f64; 3], hi: [f64; 3]) -> String {
+    format!(
+        "[{:.3}, {:.3}] x [{:.3}, {:.3}] x [{:.3}, {:.3}] mm",
+        lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]
+    )
 }
 
 /// Allowed range of `accuracy` (the trilinear step in voxel sizes). Below 0.01 a ray takes

@@ -142,15 +142,10 @@ impl<'a, R: Real> Projector<'a, R> {
         if hits.iter().sum::<usize>() == 0 {
             let (lo, hi) = (self.grid.lo, self.grid.hi);
             return Err(Error::Geometry(format!(
-                "no ray of the view at {:.4} deg hits the volume box [{:.3}, {:.3}] x [{:.3}, {:.3}] x \
-                 [{:.3}, {:.3}] mm (check DSO, DSD, nDetector, dDetector, offDetector, offOrigin)",
+                "no ray of the view at {:.4} deg hits the volume box {} (check DSO, DSD, nDetector, \
+                 dDetector, offDetector, offOrigin)",
                 angle.to_degrees(),
-                lo[0],
-                hi[0],
-                lo[1],
-                hi[1],
-                lo[2],
-                hi[2]
+                crate::geometry::box_mm(lo, hi)
             )));
         }
         Ok(Image2d::from_vec(w, h, data))
