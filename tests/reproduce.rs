@@ -278,3 +278,39 @@ fn a_stopped_cell_resumes_from_its_checkpoint_with_the_same_bits() {
     let csv2 = std::fs::read_to_string(dir.join("a/results.csv")).unwrap();
     assert_eq!(deterministic_columns(&csv2), deterministic_columns(&csv));
 }
+
+#[test]
+fn a_listing_piped_into_a_reader_that_stops_early_ends_quietly() {
+    // `unispine reproduce PLAN --list | head -1` on a plan whose listing (5000 cells, ~150 KB)
+    // is larger than a pipe's buffer: the reader closes the pipe after one byte.
+    let dir = tempfile::tempdir().unwrap();
+    let seeds: Vec<String> = (0..5000).map(|s| s.to_string()).collect();
+    let plan =
+        tiny_plan(1, "").replace("seeds = [0, 1]", &format!("seeds = [{}]", seeds.join(", ")));
+    std::fs::write(dir.path().join("big.toml"), plan).unwrap();
+    let mut child = Command::new(BIN)
+        .args(["reproduce", "big.toml", "--list"])
+        .current_dir(dir.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = [0u8; 1];
+    std::io::Read::read_exact(child.stdout.as_mut().unwrap(), &mut first).unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    use std::os::unix::process::ExitStatusExt;
+    assert_eq!(out.status.signal(), Some(libc::SIGPIPE), "{:?}", out.status);
+}
+
+#[test]
+fn the_reduced_table1_plan_runs_unispine_against_fdk_and_the_reduced_fields() {
+    let o = reproduce(&["table1", "--list"], &std::env::temp_dir());
+    let t = text(&o);
+    for m in ["unispine", "fdk", "naf", "intratomo", "tensorf", "nerf"] {
+        assert!(t.contains(&format!("runs/ct-crop/{m}/seed2")), "{m}:\n{t}");
+    }
+    assert!(!t.contains("-full/"), "{t}");
+}
