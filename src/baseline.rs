@@ -349,11 +349,28 @@ pub fn write_run(
 /// Writes a run's model into its folder.
 type ModelWriter = Box<dyn Fn(&Path) -> Result<()>>;
 
+/// The `unispine train` flags a baseline run takes besides `--data`, `--out` and `--method`
+/// (the other settings are the Gaussian trainer's; a baseline run given one is an error).
+pub const FLAGS: [&str; 4] = ["iters", "seed", "vm-lines", "threads"];
+
+/// The `unispine train` flags that only baselines read (declared here so that reproduction
+/// plans know them too).
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct BaselineFlags {
+    /// TensoRF's line factor (tensorf, tensorf-full only): `upstream` (default; SAX-NeRF reads
+    /// the plane at (0, w) instead of the line vector) or `corrected` (the line vector).
+    #[arg(long, value_enum)]
+    pub vm_lines: Option<VmLines>,
+}
+
 /// Settings of a baseline run beyond its preset.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct BaselineOptions {
     /// Replaces a field preset's iteration count (an error for FDK).
     pub iters: Option<usize>,
+    /// Seed of a field's initialisation, ray batches and stratified samples (default 0). FDK
+    /// draws nothing at random: its result does not depend on the seed.
+    pub seed: Option<u64>,
     /// TensoRF's line factor (`tensorf*` presets only; default the preset's, `upstream`).
     pub vm_lines: Option<VmLines>,
 }
@@ -406,6 +423,9 @@ pub fn run(
                     ));
                 }
                 cfg.set_iterations(n);
+            }
+            if let Some(seed) = opts.seed {
+                cfg.seed = seed;
             }
             if let (Some(l), EncoderConfig::TensorVm { lines, .. }) =
                 (opts.vm_lines, &mut cfg.encoder)

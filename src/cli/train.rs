@@ -38,10 +38,8 @@ pub struct TrainArgs {
     /// Stop (as on a signal, with a checkpoint) once this many iterations are complete.
     #[arg(long, hide = true)]
     pub stop_after: Option<usize>,
-    /// TensoRF's line factor (tensorf, tensorf-full only): `upstream` (default; SAX-NeRF reads
-    /// the plane at (0, w) instead of the line vector) or `corrected` (the line vector).
-    #[arg(long, value_enum)]
-    pub vm_lines: Option<VmLinesArg>,
+    #[command(flatten)]
+    pub baseline: crate::baseline::BaselineFlags,
     /// rayon threads (default: all cores). Results do not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
@@ -76,7 +74,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         TrainMethod::Gaussians(m) => m,
         TrainMethod::Baseline(b) => return run_baseline(b, &args),
     };
-    if args.vm_lines.is_some() {
+    if args.baseline.vm_lines.is_some() {
         bail!("invalid `--vm-lines`: only for the TensoRF presets (tensorf, tensorf-full)");
     }
     init_threads(args.threads)?;
@@ -230,13 +228,6 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `--vm-lines`.
-#[derive(Clone, Copy, Debug, clap::ValueEnum)]
-pub enum VmLinesArg {
-    Upstream,
-    Corrected,
-}
-
 /// The `--method` parser over the library's list of methods ([`TrainMethod`]): its error
 /// message for an unknown name, and every preset and baseline as clap's possible values (shown
 /// by `--help`).
@@ -287,6 +278,18 @@ fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
     let Some(out) = args.out.as_ref() else {
         bail!("invalid `--out`: a baseline needs a run folder");
     };
+    if let Some(flag) = args
+        .overrides
+        .given()
+        .into_iter()
+        .find(|f| !crate::baseline::FLAGS.contains(&&f[2..]))
+    {
+        bail!(
+            "invalid `{flag}`: a setting of the Gaussian trainer; `{}` takes only --{}",
+            b.name(),
+            crate::baseline::FLAGS.join(", --")
+        );
+    }
     let ds = crate::dataset::store::load(data)?;
     // A field run stops at the next iteration boundary on SIGINT / SIGTERM and writes what it
     // has (model, `metrics.json` with `"completed": false`); FDK is one pass and keeps the
@@ -316,10 +319,8 @@ fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
     };
     let opts = crate::baseline::BaselineOptions {
         iters: args.iters,
-        vm_lines: args.vm_lines.map(|l| match l {
-            VmLinesArg::Upstream => crate::field::encode::VmLines::Upstream,
-            VmLinesArg::Corrected => crate::field::encode::VmLines::Corrected,
-        }),
+        seed: args.overrides.seed,
+        vm_lines: args.baseline.vm_lines,
     };
     let m = crate::baseline::run(b, &ds, Some(out), opts, &signals::STOP, &mut on_event);
     if let Some(b) = bar.take() {

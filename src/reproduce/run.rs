@@ -62,25 +62,49 @@ impl Cell {
     }
     /// `unispine train` arguments of this cell except `--data`, `--out` and `--threads`.
     pub fn train_args(&self, plan: &Plan) -> Vec<String> {
-        let mut a = vec![
-            "--method".to_string(),
-            self.method.base.clone(),
-            "--iters".into(),
-            plan.iters.to_string(),
-            "--seed".into(),
-            self.seed.to_string(),
-        ];
-        if plan.compress_schedule {
+        let baseline = crate::baseline::Baseline::parse(&self.method.base);
+        let mut a = vec!["--method".to_string(), self.method.base.clone()];
+        match baseline {
+            None => a.extend(["--iters".into(), plan.iters.to_string()]),
+            Some(crate::baseline::Baseline::Field(_)) => {
+                if let Some(n) = plan.field_iters {
+                    a.extend(["--iters".into(), n.to_string()]);
+                }
+            }
+            Some(crate::baseline::Baseline::Fdk) => {}
+        }
+        a.extend(["--seed".into(), self.seed.to_string()]);
+        if plan.compress_schedule && baseline.is_none() {
             a.push("--compress-schedule".into());
         }
-        a.extend(plan.train_args.iter().cloned());
-        a.extend(self.method.args.iter().cloned());
+        let mut flags: Vec<String> = plan.train_args.clone();
+        flags.extend(self.method.args.iter().cloned());
         if let (Some(s), Some(v)) = (&plan.sweep, &self.sweep) {
-            a.push(format!("--{}", s.flag));
-            a.push(v.clone());
+            flags.push(format!("--{}", s.flag));
+            flags.push(v.clone());
         }
+        if baseline.is_some() {
+            flags = baseline_flags(&flags);
+        }
+        a.extend(flags);
         a
     }
+}
+
+/// Of `flags` (`--name [value]` ...), the ones a baseline run takes ([`crate::baseline::FLAGS`]),
+/// with their values.
+fn baseline_flags(flags: &[String]) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut keep = false;
+    for f in flags {
+        if let Some(name) = f.strip_prefix("--") {
+            keep = crate::baseline::FLAGS.contains(&name);
+        }
+        if keep {
+            out.push(f.clone());
+        }
+    }
+    out
 }
 
 /// Every cell of the plan, in order: dataset, method, sweep value, seed.

@@ -162,6 +162,23 @@ macro_rules! settings {
         }
 
         impl TrainOverrides {
+            /// The flags given, as `--name`, in declaration order.
+            pub fn given(&self) -> Vec<String> {
+                let mut v = Vec::new();
+                if self.config.is_some() {
+                    v.push("--config".to_string());
+                }
+                $($(
+                    if self.$name.is_some() {
+                        v.push(format!("--{}", stringify!($name).replace('_', "-")));
+                    }
+                )?)*
+                if self.compress_schedule {
+                    v.push("--compress-schedule".to_string());
+                }
+                v
+            }
+
             /// Replace the field of every flag given.
             fn set_flags(&self, cfg: &mut TrainConfig) {
                 $($(

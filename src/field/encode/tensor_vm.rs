@@ -38,7 +38,9 @@ pub const MAT: [[usize; 2]; 3] = [[0, 1], [0, 2], [1, 2]];
 pub const VEC: [usize; 3] = [2, 1, 0];
 
 /// Where the line factor is read from (see the module doc).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum VmLines {
     /// SAX-NeRF: the plane itself at `(0, c_v)`.

@@ -8,6 +8,8 @@
 //! name = "ablation"                 # required
 //! iters = 3000                      # required: training iterations of every cell
 //! compress_schedule = true          # scale the paper's 20000-iteration schedule to `iters`
+//! field_iters = "preset"            # neural-field cells: "preset" (their own schedule) or a
+//!                                   # count; default `iters`
 //! seeds = [0, 1, 2]                 # required
 //! methods = ["3dgs", "unispine", "paper-sigmoid"]   # required: presets or variants below
 //! floor_db = 20.0                   # stability map: cells below this test PSNR are marked
@@ -34,7 +36,9 @@
 //! ```
 //!
 //! Keys of `[train]` and of a variant are `unispine train` flags without the leading `--`
-//! (`_` and `-` are the same). Every error names the file, the line and the key, and is raised
+//! (`_` and `-` are the same). Baseline cells (FDK, the neural fields) get `--seed`, fields
+//! `--iters` from `field_iters`, and of `[train]` and the variant's flags only those a baseline
+//! takes ([`crate::baseline::FLAGS`]): the rest are Gaussian training settings. Every error names the file, the line and the key, and is raised
 //! before anything runs.
 
 use std::collections::BTreeMap;
@@ -114,6 +118,8 @@ pub struct Plan {
     pub name: String,
     pub iters: usize,
     pub compress_schedule: bool,
+    /// Iterations of neural-field cells: `None` = each preset's own schedule.
+    pub field_iters: Option<usize>,
     pub seeds: Vec<u64>,
     pub methods: Vec<MethodSpec>,
     pub datasets: Vec<DatasetSpec>,
@@ -133,6 +139,8 @@ struct RawPlan {
     iters: Spanned<i64>,
     #[serde(default)]
     compress_schedule: bool,
+    #[serde(default)]
+    field_iters: Option<Spanned<toml::Value>>,
     seeds: Spanned<Vec<i64>>,
     methods: Spanned<Vec<Spanned<String>>>,
     #[serde(default)]
@@ -230,6 +238,29 @@ impl Plan {
                 "must be >= 1".into(),
             ));
         }
+        let field_iters = match &raw.field_iters {
+            None => Some(iters as usize),
+            Some(v) => match v.get_ref() {
+                toml::Value::String(p) if p == "preset" => None,
+                toml::Value::Integer(n)
+                    if (1..=crate::field::MAX_ITERATIONS as i64).contains(n) =>
+                {
+                    Some(*n as usize)
+                }
+                _ => {
+                    return Err(err_at(
+                        file,
+                        text,
+                        v.span(),
+                        "field_iters",
+                        format!(
+                            "must be \"preset\" or a count in [1, {}]",
+                            crate::field::MAX_ITERATIONS
+                        ),
+                    ))
+                }
+            },
+        };
         let mut seeds = Vec::new();
         for &s in raw.seeds.get_ref() {
             if s < 0 || seeds.contains(&(s as u64)) {
@@ -293,6 +324,22 @@ impl Plan {
             };
             let section = format!("variants.{vn}");
             let args = flags_to_args(file, text, &section, &flags, schema)?;
+            if crate::baseline::Baseline::parse(&b).is_some() {
+                if let Some((k, _)) = flags.iter().find(|(k, _)| {
+                    !crate::baseline::FLAGS.contains(&k.get_ref().replace('_', "-").as_str())
+                }) {
+                    return Err(err_at(
+                        file,
+                        text,
+                        k.span(),
+                        &format!("{section}.{}", k.get_ref()),
+                        format!(
+                            "a Gaussian training setting: the baseline `{b}` takes only --{}",
+                            crate::baseline::FLAGS.join(", --")
+                        ),
+                    ));
+                }
+            }
             let mut all = train_args.clone();
             all.extend(args.iter().cloned());
             if let Err(m) = check_train_args(&b, &all) {
@@ -477,6 +524,23 @@ impl Plan {
                         "is empty".into(),
                     ));
                 }
+                if let Some(m) = methods.iter().find(|m| {
+                    crate::baseline::Baseline::parse(&m.base).is_some()
+                        && !crate::baseline::FLAGS.contains(&flag.as_str())
+                }) {
+                    return Err(err_at(
+                        file,
+                        text,
+                        s_ref.flag.span(),
+                        "sweep.flag",
+                        format!(
+                            "`{flag}` is a Gaussian training setting: the baseline `{}` cannot \
+                             follow the sweep (baselines take --{})",
+                            m.name,
+                            crate::baseline::FLAGS.join(", --")
+                        ),
+                    ));
+                }
                 Some(Sweep { flag, values })
             }
         };
@@ -495,6 +559,7 @@ impl Plan {
             name,
             iters: iters as usize,
             compress_schedule: raw.compress_schedule,
+            field_iters,
             seeds,
             methods,
             datasets,
@@ -559,103 +624,4 @@ pub fn builtin(name: &str) -> Option<&'static str> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn parse(t: &str) -> Result<Plan> {
-        let dir = std::env::temp_dir();
-        Plan::parse(t, Path::new("p.toml"), &dir, &TrainSchema::of_train())
-    }
-
-    const OK: &str = "name = \"t\"\niters = 10\nseeds = [0, 1]\nmethods = [\"unispine\", \"v\"]\n\
-                      [[datasets]]\nname = \"ph\"\ndata = [\"phantom\", \"--size\", \"16\"]\n\
-                      [variants.v]\nbase = \"xgaussian\"\ncolor = \"rirf-paper\"\n";
-
-    #[test]
-    fn a_good_plan_parses() {
-        let p = parse(OK).unwrap();
-        assert_eq!(p.seeds, vec![0, 1]);
-        assert_eq!(p.methods[1].base, "xgaussian");
-        assert_eq!(p.methods[1].args, vec!["--color", "rirf-paper"]);
-        assert_eq!(
-            p.datasets[0].source,
-            Source::Data(vec!["phantom".into(), "--size".into(), "16".into()])
-        );
-    }
-
-    #[test]
-    fn errors_name_the_line_and_key() {
-        let cases = [
-            (
-                OK.replace("iters = 10", "iters = 10\nbogus = 1"),
-                "line 3",
-                "bogus",
-            ),
-            (
-                OK.replace("\"unispine\", \"v\"", "\"unispine\", \"nope\""),
-                "line 4",
-                "nope",
-            ),
-            (OK.replace("color = ", "colour = "), "line 10", "colour"),
-            (
-                OK.replace("\"rirf-paper\"", "\"purple\""),
-                "line 8",
-                "purple",
-            ),
-            (
-                OK.replace("base = \"xgaussian\"", "base = \"nerf9\""),
-                "line 9",
-                "nerf9",
-            ),
-            (
-                OK.replace("color = \"rirf-paper\"", "seed = 3"),
-                "line 10",
-                "seed",
-            ),
-        ];
-        for (text, line, word) in cases {
-            let e = parse(&text).unwrap_err().to_string();
-            assert!(e.contains(line) && e.contains(word), "{e}\n--\n{text}");
-            assert!(e.contains("p.toml"), "{e}");
-        }
-        let no_ds = "name = \"t\"\niters = 10\nseeds = [0]\nmethods = [\"unispine\"]\n";
-        let e = parse(no_ds).unwrap_err().to_string();
-        assert!(e.contains("datasets"), "{e}");
-        let missing = OK.replace(
-            "data = [\"phantom\", \"--size\", \"16\"]",
-            "path = \"no/such\"",
-        );
-        let e = parse(&missing).unwrap_err().to_string();
-        assert!(e.contains("line 7") && e.contains("no/such"), "{e}");
-    }
-
-    #[test]
-    fn every_builtin_plan_parses() {
-        let schema = TrainSchema::of_train();
-        for (name, text) in BUILTIN {
-            // Paths of built-in plans may be absent here; only optional datasets use `path`.
-            let p = Plan::parse(text, Path::new(name), Path::new("."), &schema)
-                .unwrap_or_else(|e| panic!("{name}: {e}"));
-            assert_eq!(p.name, name);
-        }
-    }
-
-    #[test]
-    fn schema_lists_the_presets() {
-        let s = TrainSchema::of_train();
-        for m in ["unispine", "xgaussian", "3dgs", "spwm-only", "fdk", "naf"] {
-            assert!(s.methods.iter().any(|x| x == m), "{m} in {:?}", s.methods);
-        }
-        let help = |m: &str| s.method_help.iter().find(|h| h.0 == m).unwrap().1.clone();
-        assert!(help("unispine").contains("SPWM") && help("fdk").is_empty());
-        // The settings' flags, switch or valued, and none of the harness's own.
-        for (flag, takes) in [
-            ("color", true),
-            ("spwm", true),
-            ("compress-schedule", false),
-        ] {
-            assert_eq!(s.flag(flag), Some(&(flag.to_string(), takes)), "{flag}");
-        }
-        assert!(s.flag("resume").is_none() && s.flag("out").is_none());
-    }
-}
+mod tests;

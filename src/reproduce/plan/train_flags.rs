@@ -8,6 +8,7 @@ use std::path::Path;
 use toml::Spanned;
 
 use super::err_at;
+use crate::baseline::BaselineFlags;
 use crate::baseline::TrainMethod;
 use crate::error::Result;
 use crate::train::TrainOverrides;
@@ -33,7 +34,7 @@ impl TrainSchema {
     /// The schema of this build's `unispine train`.
     pub fn of_train() -> Self {
         let all = TrainMethod::all();
-        let flags = TrainOverrides::command()
+        let flags = train_command()
             .get_arguments()
             .filter_map(|a| Some((a.get_long()?.to_string(), a.get_action().takes_values())))
             .collect();
@@ -114,15 +115,24 @@ pub(super) fn flags_to_args(
     Ok(args)
 }
 
+/// The settings flags of `unispine train`: the Gaussian trainer's ([`TrainOverrides`]) and the
+/// baselines' ([`BaselineFlags`]).
+fn train_command() -> clap::Command {
+    <BaselineFlags as clap::Args>::augment_args(TrainOverrides::command())
+}
+
 /// Check the variant `args` of method `base` with the parser of `unispine train`'s settings
-/// ([`TrainOverrides`]); a message on failure.
+/// ([`TrainOverrides`], [`BaselineFlags`]); a message on failure.
 pub(super) fn check_train_args(base: &str, args: &[String]) -> std::result::Result<(), String> {
     use clap::FromArgMatches;
     TrainMethod::parse(base)?;
     let argv = std::iter::once("train".to_string()).chain(args.iter().cloned());
-    TrainOverrides::command()
+    train_command()
         .try_get_matches_from(argv)
-        .and_then(|m| TrainOverrides::from_arg_matches(&m))
+        .and_then(|m| {
+            TrainOverrides::from_arg_matches(&m)?;
+            BaselineFlags::from_arg_matches(&m)
+        })
         .map(|_| ())
         .map_err(|e| {
             let s = e.to_string();
