@@ -1,12 +1,14 @@
 //! `unispine reproduce`: the paper's tables regenerated from a plan (datasets x methods x
 //! seeds), with verdicts, provenance, charts and a Slurm job array.
 //!
-//! Stages, in data-flow order: [`plan`] (TOML -> validated plan) -> [`run`] (cells as
+//! Stages, in data-flow order: [`plan`] (TOML -> validated plan) -> [`cell`] (its cells and
+//! their `unispine train` arguments) -> [`run`] (cells as
 //! `unispine train` child processes into `OUT/runs/DATASET/METHOD/seedK/`, resumable) ->
 //! [`aggregate`] (results.csv / results.json, mean +- sd per row) -> [`verdict`] (the paper's
 //! claims as paired differences with 95 % intervals) -> `tables.md`.
 
 pub mod aggregate;
+pub mod cell;
 pub mod compactness;
 pub mod plan;
 pub mod provenance;

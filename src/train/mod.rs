@@ -32,8 +32,10 @@
 //! (default: the last of `iterations`) with a prune by importance; `finetune` more iterations
 //! follow without densification, statistics or opacity resets.
 //!
-//! The loop with its events and files is [`session`]; the run folder is [`run_dir`].
+//! The loop with its events and files is [`session`]; the run folder is [`run_dir`], its
+//! resumable state [`checkpoint`].
 
+pub mod checkpoint;
 pub mod compact;
 pub mod config;
 pub mod event;

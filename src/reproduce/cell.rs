@@ -1,0 +1,115 @@
+//! The cells of a plan (dataset x method x [sweep value x] seed) and the `unispine train`
+//! arguments of each: Gaussian cells get the plan's iterations, schedule and `[train]` flags;
+//! baseline cells their seed, fields `--iters` from `field_iters`, and only the flags a baseline
+//! takes ([`crate::baseline::FLAGS`]).
+
+use std::path::{Path, PathBuf};
+
+use super::plan::{MethodSpec, Plan};
+
+/// One cell of a plan.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cell {
+    /// 0-based position in the plan's cell order (dataset, method, sweep value, seed).
+    pub index: usize,
+    pub dataset: String,
+    pub method: MethodSpec,
+    /// The sweep value of this cell (the flag is the plan's).
+    pub sweep: Option<String>,
+    pub seed: u64,
+}
+
+impl Cell {
+    /// Folder of the method (and sweep value) below `runs/DATASET/`.
+    pub fn method_dir(&self, plan: &Plan) -> String {
+        match (&plan.sweep, &self.sweep) {
+            (Some(s), Some(v)) => format!("{}@{}={}", self.method.name, s.flag, v),
+            _ => self.method.name.clone(),
+        }
+    }
+    /// The run folder relative to OUT.
+    pub fn rel_dir(&self, plan: &Plan) -> PathBuf {
+        PathBuf::from("runs")
+            .join(&self.dataset)
+            .join(self.method_dir(plan))
+            .join(format!("seed{}", self.seed))
+    }
+    /// A short label: `DATASET/METHOD[@flag=v]/seedK`.
+    pub fn label(&self, plan: &Plan) -> String {
+        self.rel_dir(plan)
+            .strip_prefix("runs")
+            .unwrap_or(Path::new(""))
+            .display()
+            .to_string()
+    }
+    /// `unispine train` arguments of this cell except `--data`, `--out` and `--threads`.
+    pub fn train_args(&self, plan: &Plan) -> Vec<String> {
+        let baseline = crate::baseline::Baseline::parse(&self.method.base);
+        let mut a = vec!["--method".to_string(), self.method.base.clone()];
+        match baseline {
+            None => a.extend(["--iters".into(), plan.iters.to_string()]),
+            Some(crate::baseline::Baseline::Field(_)) => {
+                if let Some(n) = plan.field_iters {
+                    a.extend(["--iters".into(), n.to_string()]);
+                }
+            }
+            Some(crate::baseline::Baseline::Fdk) => {}
+        }
+        a.extend(["--seed".into(), self.seed.to_string()]);
+        if plan.compress_schedule && baseline.is_none() {
+            a.push("--compress-schedule".into());
+        }
+        let mut flags: Vec<String> = plan.train_args.clone();
+        flags.extend(self.method.args.iter().cloned());
+        if let (Some(s), Some(v)) = (&plan.sweep, &self.sweep) {
+            flags.push(format!("--{}", s.flag));
+            flags.push(v.clone());
+        }
+        if baseline.is_some() {
+            flags = baseline_flags(&flags);
+        }
+        a.extend(flags);
+        a
+    }
+}
+
+/// Of `flags` (`--name [value]` ...), the ones a baseline run takes ([`crate::baseline::FLAGS`]),
+/// with their values.
+fn baseline_flags(flags: &[String]) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut keep = false;
+    for f in flags {
+        if let Some(name) = f.strip_prefix("--") {
+            keep = crate::baseline::FLAGS.contains(&name);
+        }
+        if keep {
+            out.push(f.clone());
+        }
+    }
+    out
+}
+
+/// Every cell of the plan, in order: dataset, method, sweep value, seed.
+pub fn cells(plan: &Plan) -> Vec<Cell> {
+    let sweep: Vec<Option<String>> = match &plan.sweep {
+        Some(s) => s.values.iter().cloned().map(Some).collect(),
+        None => vec![None],
+    };
+    let mut out = Vec::new();
+    for d in &plan.datasets {
+        for m in &plan.methods {
+            for v in &sweep {
+                for &seed in &plan.seeds {
+                    out.push(Cell {
+                        index: out.len(),
+                        dataset: d.name.clone(),
+                        method: m.clone(),
+                        sweep: v.clone(),
+                        seed,
+                    });
+                }
+            }
+        }
+    }
+    out
+}
