@@ -61,6 +61,20 @@ impl Baseline {
         }
     }
 
+    /// One line on what the baseline runs (as `unispine train --help` and `tables.md` show it).
+    pub fn help(self) -> String {
+        match self {
+            Baseline::Fdk => {
+                "FDK (TIGRE semantics: cosine weights, Ram-Lak, 1/U^2 backprojection) \
+                              from the training views, re-projected at the test views"
+                    .into()
+            }
+            Baseline::Field(p) => FieldConfig::preset(p, 1)
+                .map(|c| c.describe())
+                .unwrap_or_default(),
+        }
+    }
+
     /// The baseline called `name`, if any.
     pub fn parse(name: &str) -> Option<Baseline> {
         if name == "fdk" {
@@ -90,8 +104,8 @@ impl TrainMethod {
         }
     }
 
-    /// Every method name with its one line of help (empty for the baselines): the presets in
-    /// declaration order, then the baselines in table order.
+    /// Every method name with its one line of help: the presets in declaration order, then the
+    /// baselines in table order.
     pub fn all() -> Vec<(&'static str, String)> {
         let presets = <Method as clap::ValueEnum>::value_variants()
             .iter()
@@ -101,7 +115,10 @@ impl TrainMethod {
                     .unwrap_or_default();
                 (m.name(), help)
             });
-        let baselines = Baseline::names().into_iter().map(|b| (b, String::new()));
+        let baselines = Baseline::names().into_iter().map(|b| {
+            let help = Baseline::parse(b).map(Baseline::help).unwrap_or_default();
+            (b, help)
+        });
         presets.chain(baselines).collect()
     }
 

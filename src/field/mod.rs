@@ -241,6 +241,56 @@ impl FieldConfig {
         self.iterations = iters;
     }
 
+    /// Whether `name` is a preset reduced to fit a 2-core CPU (false for unknown names).
+    pub fn is_reduced(name: &str) -> bool {
+        FieldConfig::preset(name, 1).is_ok_and(|c| c.reduced)
+    }
+
+    /// One line on what the preset trains: encoder, MLP, rays x samples, iterations per view.
+    pub fn describe(&self) -> String {
+        let enc = match &self.encoder {
+            EncoderConfig::Frequency { bands } => format!("frequency encoding, {bands} bands"),
+            EncoderConfig::HashGrid {
+                levels,
+                features,
+                table_size,
+                base_resolution,
+            } => format!(
+                "hash grid {levels} levels x {features} features, table 2^{}, base {base_resolution}",
+                table_size.trailing_zeros()
+            ),
+            EncoderConfig::TensorVm {
+                resolution,
+                components,
+                ..
+            } => format!("TensoRF VM 3 x {components} x {resolution}^2"),
+            EncoderConfig::DenseGrid {
+                resolution,
+                features,
+            } => format!("dense grid {resolution}^3 x {features}"),
+        };
+        format!(
+            "{}: {enc}; MLP {} x {}{}; {} rays x {} samples",
+            self.label(),
+            self.num_layers,
+            self.hidden_dim,
+            if self.skips.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    " (skip {})",
+                    self.skips
+                        .iter()
+                        .map(|k| k.to_string())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            },
+            self.n_rays,
+            self.n_samples
+        )
+    }
+
     /// The name for tables: the preset, with ` (reduced)` for reduced presets.
     pub fn label(&self) -> String {
         if self.reduced {

@@ -23,6 +23,15 @@ fn methods(rows: &[Row]) -> Vec<String> {
     m
 }
 
+/// The chart label of method `m` ([`method_label`](crate::reproduce::aggregate::method_label)).
+fn label(rows: &[Row], m: &str) -> String {
+    let base = rows
+        .iter()
+        .find(|r| r.method == m)
+        .map_or("", |r| r.base.as_str());
+    crate::reproduce::aggregate::method_label(m, base)
+}
+
 fn datasets(rows: &[Row]) -> Vec<String> {
     let mut d: Vec<String> = Vec::new();
     for r in rows {
@@ -93,7 +102,7 @@ pub fn tradeoff(rows: &[Row], dataset: &str) -> String {
                 colour: ci,
             });
             panel.markers.push(Marker {
-                label: m.clone(),
+                label: label(rows, m),
                 x: xm,
                 y: pm,
                 colour: ci,
@@ -159,7 +168,7 @@ pub fn psnr_vs_count(rows: &[Row], dataset: &str) -> String {
         if let Some((_, _, n, y)) = unb.iter().find(|u| u.0 == dataset && u.1 == *m) {
             pts.push((*n, *y));
             p.markers.push(Marker {
-                label: format!("{m} unbounded"),
+                label: format!("{} unbounded", label(rows, m)),
                 x: *n,
                 y: *y,
                 colour: ci,
@@ -167,7 +176,7 @@ pub fn psnr_vs_count(rows: &[Row], dataset: &str) -> String {
         }
         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
         p.lines.push(Line {
-            label: m.clone(),
+            label: label(rows, m),
             points: pts,
         });
     }
@@ -225,7 +234,7 @@ pub fn curves(rows: &[Row], dataset: &str, out: &Path) -> String {
             colour: ci,
         });
         p.lines.push(Line {
-            label: format!("{m} (n = {})", series.len()),
+            label: format!("{} (n = {})", label(rows, m), series.len()),
             points: super::thin(&mean, 300),
         });
     }

@@ -264,6 +264,16 @@ fn pm(v: &[f64], prec: usize) -> String {
     }
 }
 
+/// How a method is named in tables and charts: the plan's name, with ` (reduced)` when it runs
+/// a reduced neural-field preset (its numbers are not those of the upstream configuration).
+pub fn method_label(method: &str, base: &str) -> String {
+    if crate::field::FieldConfig::is_reduced(base) && !method.contains("reduced") {
+        format!("{method} (reduced)")
+    } else {
+        method.to_string()
+    }
+}
+
 /// What a method row runs, in words.
 pub fn describe(plan: &Plan, method: &str, preset_help: &[(String, String)]) -> String {
     let Some(m) = plan.methods.iter().find(|m| m.name == method) else {
@@ -373,16 +383,21 @@ pub fn tables_md(
                 .and_then(|p| verdict::paper_row(p, base))
                 .map(|p| format!("{:.2} / {:.4} / {:.0}", p.psnr, p.ssim, p.train_time_s))
                 .unwrap_or_default();
+            let gaussians = if crate::baseline::Baseline::parse(base).is_some() {
+                "-".to_string()
+            } else {
+                pm(&vals(rs, |r| r.n_gaussians.map(|x| x as f64)), 0)
+            };
             let _ = writeln!(
                 s,
-                "| {method} |{} {n} of {} | {} | {} | {} | {} | {} | {paper} |",
+                "| {} |{} {n} of {} | {} | {} | {} | {} | {gaussians} | {paper} |",
+                method_label(method, base),
                 sv.as_ref().map(|v| format!(" {v} |")).unwrap_or_default(),
                 rs.len(),
                 pm(&vals(rs, |r| r.psnr), 2),
                 pm(&vals(rs, |r| r.ssim), 4),
                 pm(&vals(rs, |r| r.train_time_s), 1),
                 pm(&vals(rs, |r| r.fps), 1),
-                pm(&vals(rs, |r| r.n_gaussians.map(|x| x as f64)), 0),
             );
         }
         s.push('\n');
@@ -397,10 +412,17 @@ pub fn tables_md(
             describe(plan, &m.name, preset_help)
         );
     }
-    if plan.compress_schedule || !plan.train_args.is_empty() {
+    let base_of =
+        |m: &crate::reproduce::plan::MethodSpec| crate::baseline::Baseline::parse(&m.base);
+    if plan.methods.iter().any(|m| base_of(m).is_none()) {
         let _ = writeln!(
             s,
-            "\nEvery cell: `unispine train --iters {}{}{}`.",
+            "\n{}: `unispine train --iters {}{}{}`.",
+            if plan.methods.iter().any(|m| base_of(m).is_some()) {
+                "Every Gaussian cell"
+            } else {
+                "Every cell"
+            },
             plan.iters,
             if plan.compress_schedule {
                 " --compress-schedule"
@@ -411,6 +433,20 @@ pub fn tables_md(
                 String::new()
             } else {
                 format!(" {}", plan.train_args.join(" "))
+            }
+        );
+    }
+    if plan
+        .methods
+        .iter()
+        .any(|m| matches!(base_of(m), Some(crate::baseline::Baseline::Field(_))))
+    {
+        let _ = writeln!(
+            s,
+            "\nEvery neural-field cell: {}; FDK is one pass.",
+            match plan.field_iters {
+                Some(n) => format!("`unispine train --iters {n}`"),
+                None => "the preset's own schedule".into(),
             }
         );
     }
@@ -554,4 +590,18 @@ pub fn write_all(
     w("results.json", &to_json(plan, &rows, &v))?;
     w("tables.md", &tables_md(plan, &rows, &v, preset_help, extra))?;
     Ok((rows, v))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::method_label;
+
+    #[test]
+    fn reduced_field_presets_are_labelled_as_reduced() {
+        assert_eq!(method_label("naf", "naf"), "naf (reduced)");
+        assert_eq!(method_label("my-tf", "tensorf"), "my-tf (reduced)");
+        assert_eq!(method_label("naf-full", "naf-full"), "naf-full");
+        assert_eq!(method_label("unispine", "unispine"), "unispine");
+        assert_eq!(method_label("fdk", "fdk"), "fdk");
+    }
 }

@@ -87,7 +87,17 @@ fn schema_lists_the_presets() {
         assert!(s.methods.iter().any(|x| x == m), "{m} in {:?}", s.methods);
     }
     let help = |m: &str| s.method_help.iter().find(|h| h.0 == m).unwrap().1.clone();
-    assert!(help("unispine").contains("SPWM") && help("fdk").is_empty());
+    assert!(help("unispine").contains("SPWM") && help("fdk").contains("FDK"));
+    assert!(
+        help("naf").starts_with("naf (reduced): hash grid 8 levels"),
+        "{}",
+        help("naf")
+    );
+    assert!(
+        help("nerf-full").starts_with("nerf-full: frequency"),
+        "{}",
+        help("nerf-full")
+    );
     // The settings' flags, switch or valued, and none of the harness's own.
     for (flag, takes) in [
         ("color", true),
