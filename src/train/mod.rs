@@ -40,6 +40,7 @@ pub mod event;
 pub mod run_dir;
 pub mod session;
 pub mod settings;
+pub mod stages;
 
 use std::time::Instant;
 
@@ -61,6 +62,7 @@ pub use event::Event;
 pub use run_dir::{Checkpoint, EvalPoint, Metrics, RunDir};
 pub use session::{resume, run, run_with, Control};
 pub use settings::TrainOverrides;
+pub use stages::StageTimes;
 
 /// Scene extent: 1.1 x max distance of the camera centres from their mean (3DGS
 /// `getNerfppNorm`, used as `spatial_lr_scale` and in the densification thresholds).
@@ -123,6 +125,9 @@ pub struct Trainer<'a> {
     pub iteration: usize,
     /// What the compaction did, once it has run.
     pub compaction: Option<compact::Compaction>,
+    /// Stage timers of [`Trainer::step`] (`None`, the default: not timed). Timing changes no
+    /// result.
+    pub stages: Option<StageTimes>,
     stack: Vec<usize>,
     rng: ChaCha8Rng,
 }
@@ -166,6 +171,7 @@ impl<'a> Trainer<'a> {
             extent,
             iteration: 0,
             compaction: None,
+            stages: None,
             stack: Vec::new(),
         })
     }
@@ -298,6 +304,8 @@ impl<'a> Trainer<'a> {
 
     /// Run iteration `self.iteration + 1`.
     pub fn step(&mut self) -> Result<StepInfo> {
+        let mut laps = stages::Laps::new(self.stages.is_some());
+        let mut t = StageTimes::default();
         let it = self.iteration + 1;
         let cfg = &self.cfg;
         let lr = cfg.lr.at(it, self.extent);
@@ -311,6 +319,7 @@ impl<'a> Trainer<'a> {
         let cam = self.ds.train_camera(view);
         let (img, saved) = render::forward(&self.state.params, &cam, &settings)
             .map_err(|e| diverged(format!("rendering training view {view}: {e}")))?;
+        t.render_forward = laps.lap();
         if saved.splats.radius.iter().all(|&r| r == 0) {
             return Err(diverged(format!(
                 "nothing is rendered in training view {view}: none of the {} Gaussians is visible",
@@ -326,6 +335,7 @@ impl<'a> Trainer<'a> {
             _ => None,
         };
         let (lv, d_img) = loss::forward_backward(&img, gt, weights.as_ref(), &cfg.loss);
+        t.loss = laps.lap();
         if !lv.total.is_finite() {
             return Err(diverged(format!(
                 "loss is {} on training view {view}",
@@ -333,10 +343,12 @@ impl<'a> Trainer<'a> {
             )));
         }
         let grads = render::backward(&self.state.params, &cam, &settings, &saved, &d_img);
+        t.render_backward = laps.lap();
         if let Err(e) = grads.params.check_finite() {
             return Err(diverged(format!("gradient on training view {view}: {e}")));
         }
         let psnr = eval::psnr(&eval::clamp01(&img), gt);
+        laps.lap();
         let eval = if cfg.is_eval_point(it) {
             let te = Instant::now();
             let result =
@@ -349,6 +361,7 @@ impl<'a> Trainer<'a> {
         } else {
             None
         };
+        t.eval = laps.lap();
         let d = &cfg.densify;
         let last = it == cfg.total_iterations();
         let mut active = [!last; N_GROUPS];
@@ -371,6 +384,7 @@ impl<'a> Trainer<'a> {
         } else if d.collects(it) && !last && compact_at.is_none_or(|a| it < a) {
             self.state.accumulate(&grads.mean2d_ndc_norm, &grads.radius);
             if d.densifies(it) {
+                t.densify = laps.lap();
                 let seed = cfg.seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ it as u64;
                 densified =
                     Some(
@@ -378,16 +392,21 @@ impl<'a> Trainer<'a> {
                             .densify_and_prune(d, self.extent, d.prunes_big(it), seed),
                     );
                 active = [false; N_GROUPS];
+                t.densify_events = laps.lap();
+                t.n_densify_events = 1;
+                t.densify += t.densify_events;
             }
             if d.resets(it) {
                 self.state.reset_opacity(d.reset_opacity_to);
                 active[Group::Opacity as usize] = false;
             }
         }
+        t.densify += laps.lap();
         if active.iter().any(|&a| a) {
             let st = &mut self.state;
             st.adam.step(&mut st.params, &grads.params, &lr, &active);
         }
+        t.adam = laps.lap();
         if let Err(e) = self.state.params.check_finite() {
             return Err(diverged(format!(
                 "parameter after the update on training view {view}: {e}"
@@ -401,6 +420,18 @@ impl<'a> Trainer<'a> {
             )));
         }
         self.iteration = it;
+        if let Some(s) = &mut self.stages {
+            s.render_forward += t.render_forward;
+            s.loss += t.loss;
+            s.render_backward += t.render_backward;
+            s.adam += t.adam;
+            s.densify += t.densify;
+            s.densify_events += t.densify_events;
+            s.n_densify_events += t.n_densify_events;
+            s.eval += t.eval;
+            s.step += laps.total();
+            s.steps += 1;
+        }
         Ok(StepInfo {
             iteration: it,
             view,
