@@ -8,7 +8,7 @@ mod cli;
 mod tiny;
 
 use tiny::{dataset, hidden, tiny};
-use unispine::audit::train_bench;
+use unispine::audit::train_bench::{self, Clock};
 use unispine::train::{Method, StageTimes, Trainer};
 
 #[test]
@@ -37,17 +37,21 @@ fn stage_timers_change_no_bit_and_sum_to_the_step() {
     assert_eq!(s.steps, 60);
     assert!(events > 0, "the tiny schedule densifies");
     assert_eq!(s.n_densify_events, events);
-    assert!(s.densify_events > 0.0 && s.densify_events <= s.densify);
-    let secs = s.seconds();
-    for (name, v) in unispine::train::stages::STAGES.iter().zip(secs) {
-        assert!(v >= -1e-9, "{name}: {v}");
+    let w = &s.wall;
+    assert!(w.densify_events > 0.0 && w.densify_events <= w.densify);
+    for c in [&s.wall, &s.cpu] {
+        let secs = c.seconds();
+        for (name, v) in unispine::train::stages::STAGES.iter().zip(secs) {
+            assert!(v >= -1e-9, "{name}: {v}");
+        }
+        // The named stages are laps inside the step; everything else is bookkeeping.
+        let sum: f64 = secs.iter().sum();
+        assert!((sum - c.step).abs() <= 1e-9 * c.step.max(1.0), "{sum} vs {}", c.step);
     }
-    // The named stages are laps inside the step; everything else is bookkeeping.
-    let sum: f64 = secs.iter().sum();
-    assert!((sum - s.step).abs() <= 1e-9 * s.step.max(1.0), "{sum} vs {}", s.step);
-    assert!(s.render_forward > 0.0 && s.render_backward > 0.0 && s.loss > 0.0);
+    assert!(w.render_forward > 0.0 && w.render_backward > 0.0 && w.loss > 0.0);
+    assert!(s.cpu.step > 0.0);
     // Test evaluation at iterations 1 and 60 is timed on its own.
-    assert!(s.eval > 0.0);
+    assert!(w.eval > 0.0);
 }
 
 #[test]
@@ -61,27 +65,33 @@ fn bench_amortises_densification_and_sums_to_the_step() {
     assert_eq!(b.stages.n_densify_events, 1);
     assert!(b.densify_phase);
     assert_eq!(b.densify_interval, 200);
-    assert_eq!(b.densify_event, b.stages.densify_events);
-    let v = b.per_iteration();
-    let raw = b.stages.seconds().map(|x| x / 3.0);
-    let want = raw[4] - b.stages.densify_events / 3.0 + b.densify_event / 200.0;
-    assert!((v[4] - want).abs() <= 1e-15, "{} vs {want}", v[4]);
-    for k in [0, 1, 2, 3, 5, 6] {
-        assert_eq!(v[k], raw[k]);
+    assert_eq!(b.densify_event.0, b.stages.wall.densify_events);
+    assert_eq!(b.densify_event.1, b.stages.cpu.densify_events);
+    for (clock, st, ev) in [
+        (Clock::Wall, &b.stages.wall, b.densify_event.0),
+        (Clock::Cpu, &b.stages.cpu, b.densify_event.1),
+    ] {
+        let v = b.per_iteration(clock);
+        let raw = st.seconds().map(|x| x / 3.0);
+        let want = raw[4] - st.densify_events / 3.0 + ev / 200.0;
+        assert!((v[4] - want).abs() <= 1e-15, "{} vs {want}", v[4]);
+        for k in [0, 1, 2, 3, 5, 6] {
+            assert_eq!(v[k], raw[k]);
+        }
+        assert!((b.step(clock) - v.iter().sum::<f64>()).abs() <= 1e-15);
+        let share = b.non_rasterizer_share(clock);
+        assert!(share > 0.0 && share < 1.0, "{share}");
+        assert!((share - (1.0 - (v[0] + v[2]) / b.step(clock))).abs() < 1e-12);
     }
-    assert!((b.step() - v.iter().sum::<f64>()).abs() <= 1e-15);
-    let share = b.non_rasterizer_share();
-    assert!(share > 0.0 && share < 1.0, "{share}");
-    assert!((share - (1.0 - (v[0] + v[2]) / b.step())).abs() < 1e-12);
     // No event in the window (601..=603): one is timed on a copy of the state.
     let b = train_bench::time_train(&ds, 600, 3, Some(hidden().cast())).unwrap();
     assert_eq!(b.stages.n_densify_events, 0);
-    assert!(b.densify_phase && b.densify_event > 0.0);
+    assert!(b.densify_phase && b.densify_event.0 > 0.0 && b.densify_event.1 > 0.0);
     // Past the phase: nothing amortised.
     let b = train_bench::time_train(&ds, 9000, 2, Some(hidden().cast())).unwrap();
     assert!(!b.densify_phase);
-    assert_eq!(b.densify_event, 0.0);
-    assert_eq!(b.per_iteration()[4], b.stages.densify / 2.0);
+    assert_eq!(b.densify_event, (0.0, 0.0));
+    assert_eq!(b.per_iteration(Clock::Wall)[4], b.stages.wall.densify / 2.0);
 }
 
 #[test]

@@ -20,6 +20,7 @@ use crate::dataset::Dataset;
 use crate::densify::TrainState;
 use crate::error::{Error, Result};
 use crate::gaussians::Gaussians;
+use crate::field::train::cpu_seconds;
 use crate::train::{stages::STAGES, Method, StageTimes, TrainConfig, Trainer};
 use crate::volume::attenuation::{HuConversion, Normalization};
 use crate::volume::phantom::{self, PhantomSpec};
@@ -111,45 +112,61 @@ pub struct TrainBench {
     pub stages: StageTimes,
     /// Whether the timed iterations are in the densification phase of the schedule.
     pub densify_phase: bool,
-    /// Mean seconds of one clone / split / prune event (timed in the window, or on a copy of
-    /// the state after it when no event fell in the window; 0 outside the phase).
-    pub densify_event: f64,
+    /// Mean (wall, process CPU) seconds of one clone / split / prune event (timed in the
+    /// window, or on a copy of the state after it when no event fell in the window; 0 outside
+    /// the phase).
+    pub densify_event: (f64, f64),
     /// The preset's densification interval.
     pub densify_interval: usize,
-    /// Process CPU time (all threads) per timed iteration, s (Linux; None elsewhere).
+    /// Process CPU time (all threads) per timed iteration from `/proc` (Linux; None
+    /// elsewhere), a check of the stage timers' CPU clock.
     pub cpu_per_iteration: Option<f64>,
+}
+
+/// Which clock [`TrainBench::per_iteration`] reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Clock {
+    Wall,
+    /// Process CPU time, all threads.
+    Cpu,
 }
 
 impl TrainBench {
     /// Seconds per iteration by stage ([`STAGES`] order) with the densification events
     /// amortised over the interval: the statistics and resets every iteration plus one event
     /// / interval.
-    pub fn per_iteration(&self) -> [f64; 7] {
-        let s = &self.stages;
-        let n = s.steps.max(1) as f64;
+    pub fn per_iteration(&self, clock: Clock) -> [f64; 7] {
+        let (s, event) = match clock {
+            Clock::Wall => (&self.stages.wall, self.densify_event.0),
+            Clock::Cpu => (&self.stages.cpu, self.densify_event.1),
+        };
+        let n = self.stages.steps.max(1) as f64;
         let mut v = s.seconds().map(|x| x / n);
-        let in_window = s.densify_events / n;
-        v[4] -= in_window;
+        v[4] -= s.densify_events / n;
         if self.densify_phase {
-            v[4] += self.densify_event / self.densify_interval.max(1) as f64;
+            v[4] += event / self.densify_interval.max(1) as f64;
         }
         v
     }
 
     /// The step time of [`TrainBench::per_iteration`] (the sum of its stages).
-    pub fn step(&self) -> f64 {
-        self.per_iteration().iter().sum()
+    pub fn step(&self, clock: Clock) -> f64 {
+        self.per_iteration(clock).iter().sum()
     }
 
     /// Share of the step outside the rasterizer (everything but render forward and backward).
-    pub fn non_rasterizer_share(&self) -> f64 {
-        let v = self.per_iteration();
-        1.0 - (v[0] + v[2]) / self.step()
+    pub fn non_rasterizer_share(&self, clock: Clock) -> f64 {
+        let v = self.per_iteration(clock);
+        1.0 - (v[0] + v[2]) / self.step(clock)
     }
 
-    /// The stage names with their per-iteration seconds.
-    pub fn rows(&self) -> Vec<(&'static str, f64)> {
-        STAGES.iter().copied().zip(self.per_iteration()).collect()
+    /// The stage names with their per-iteration (wall, CPU) seconds.
+    pub fn rows(&self) -> Vec<(&'static str, f64, f64)> {
+        let (w, c) = (
+            self.per_iteration(Clock::Wall),
+            self.per_iteration(Clock::Cpu),
+        );
+        (0..STAGES.len()).map(|k| (STAGES[k], w[k], c[k])).collect()
     }
 }
 
@@ -194,14 +211,22 @@ pub fn time_train(
     let last = tr.iteration;
     let densify_phase = (first_iteration..=last).any(|it| it > d.from_iter && it < d.until_iter);
     let densify_event = if !densify_phase {
-        0.0
+        (0.0, 0.0)
     } else if stages.n_densify_events > 0 {
-        stages.densify_events / stages.n_densify_events as f64
+        let k = stages.n_densify_events as f64;
+        (
+            stages.wall.densify_events / k,
+            stages.cpu.densify_events / k,
+        )
     } else {
         let mut st = tr.state.clone();
+        let c0 = cpu_seconds(libc::CLOCK_PROCESS_CPUTIME_ID);
         let t0 = std::time::Instant::now();
         std::hint::black_box(st.densify_and_prune(d, tr.extent, d.prunes_big(last), cfg.seed));
-        t0.elapsed().as_secs_f64()
+        (
+            t0.elapsed().as_secs_f64(),
+            cpu_seconds(libc::CLOCK_PROCESS_CPUTIME_ID) - c0,
+        )
     };
     Ok(TrainBench {
         size,

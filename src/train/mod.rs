@@ -305,7 +305,7 @@ impl<'a> Trainer<'a> {
     /// Run iteration `self.iteration + 1`.
     pub fn step(&mut self) -> Result<StepInfo> {
         let mut laps = stages::Laps::new(self.stages.is_some());
-        let mut t = StageTimes::default();
+        let mut t = stages::Recorder::default();
         let it = self.iteration + 1;
         let cfg = &self.cfg;
         let lr = cfg.lr.at(it, self.extent);
@@ -319,7 +319,7 @@ impl<'a> Trainer<'a> {
         let cam = self.ds.train_camera(view);
         let (img, saved) = render::forward(&self.state.params, &cam, &settings)
             .map_err(|e| diverged(format!("rendering training view {view}: {e}")))?;
-        t.render_forward = laps.lap();
+        t.set(|s| &mut s.render_forward, laps.lap());
         if saved.splats.radius.iter().all(|&r| r == 0) {
             return Err(diverged(format!(
                 "nothing is rendered in training view {view}: none of the {} Gaussians is visible",
@@ -335,7 +335,7 @@ impl<'a> Trainer<'a> {
             _ => None,
         };
         let (lv, d_img) = loss::forward_backward(&img, gt, weights.as_ref(), &cfg.loss);
-        t.loss = laps.lap();
+        t.set(|s| &mut s.loss, laps.lap());
         if !lv.total.is_finite() {
             return Err(diverged(format!(
                 "loss is {} on training view {view}",
@@ -343,7 +343,7 @@ impl<'a> Trainer<'a> {
             )));
         }
         let grads = render::backward(&self.state.params, &cam, &settings, &saved, &d_img);
-        t.render_backward = laps.lap();
+        t.set(|s| &mut s.render_backward, laps.lap());
         if let Err(e) = grads.params.check_finite() {
             return Err(diverged(format!("gradient on training view {view}: {e}")));
         }
@@ -361,7 +361,7 @@ impl<'a> Trainer<'a> {
         } else {
             None
         };
-        t.eval = laps.lap();
+        t.set(|s| &mut s.eval, laps.lap());
         let d = &cfg.densify;
         let last = it == cfg.total_iterations();
         let mut active = [!last; N_GROUPS];
@@ -384,7 +384,7 @@ impl<'a> Trainer<'a> {
         } else if d.collects(it) && !last && compact_at.is_none_or(|a| it < a) {
             self.state.accumulate(&grads.mean2d_ndc_norm, &grads.radius);
             if d.densifies(it) {
-                t.densify = laps.lap();
+                t.set(|s| &mut s.densify, laps.lap());
                 let seed = cfg.seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ it as u64;
                 densified =
                     Some(
@@ -392,21 +392,22 @@ impl<'a> Trainer<'a> {
                             .densify_and_prune(d, self.extent, d.prunes_big(it), seed),
                     );
                 active = [false; N_GROUPS];
-                t.densify_events = laps.lap();
-                t.n_densify_events = 1;
-                t.densify += t.densify_events;
+                let e = laps.lap();
+                t.set(|s| &mut s.densify_events, e);
+                t.add(|s| &mut s.densify, e);
+                t.0.n_densify_events = 1;
             }
             if d.resets(it) {
                 self.state.reset_opacity(d.reset_opacity_to);
                 active[Group::Opacity as usize] = false;
             }
         }
-        t.densify += laps.lap();
+        t.add(|s| &mut s.densify, laps.lap());
         if active.iter().any(|&a| a) {
             let st = &mut self.state;
             st.adam.step(&mut st.params, &grads.params, &lr, &active);
         }
-        t.adam = laps.lap();
+        t.set(|s| &mut s.adam, laps.lap());
         if let Err(e) = self.state.params.check_finite() {
             return Err(diverged(format!(
                 "parameter after the update on training view {view}: {e}"
@@ -421,16 +422,9 @@ impl<'a> Trainer<'a> {
         }
         self.iteration = it;
         if let Some(s) = &mut self.stages {
-            s.render_forward += t.render_forward;
-            s.loss += t.loss;
-            s.render_backward += t.render_backward;
-            s.adam += t.adam;
-            s.densify += t.densify;
-            s.densify_events += t.densify_events;
-            s.n_densify_events += t.n_densify_events;
-            s.eval += t.eval;
-            s.step += laps.total();
-            s.steps += 1;
+            t.set(|s| &mut s.step, laps.total());
+            t.0.steps = 1;
+            s.add(&t.0);
         }
         Ok(StepInfo {
             iteration: it,
