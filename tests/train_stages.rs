@@ -46,7 +46,11 @@ fn stage_timers_change_no_bit_and_sum_to_the_step() {
         }
         // The named stages are laps inside the step; everything else is bookkeeping.
         let sum: f64 = secs.iter().sum();
-        assert!((sum - c.step).abs() <= 1e-9 * c.step.max(1.0), "{sum} vs {}", c.step);
+        assert!(
+            (sum - c.step).abs() <= 1e-9 * c.step.max(1.0),
+            "{sum} vs {}",
+            c.step
+        );
     }
     assert!(w.render_forward > 0.0 && w.render_backward > 0.0 && w.loss > 0.0);
     assert!(s.cpu.step > 0.0);
@@ -100,7 +104,9 @@ fn bench_train_prints_the_stages_on_a_dataset_folder_and_the_phantom() {
     let data = dir.path().join("tiny");
     unispine::dataset::store::save(&dataset(), &data).unwrap();
     let d = data.display().to_string();
-    let out = cli::ok(&["bench", "train", "--data", &d, "--warmup", "3", "--iters", "2"]);
+    let out = cli::ok(&[
+        "bench", "train", "--data", &d, "--warmup", "3", "--iters", "2",
+    ]);
     for w in [
         "32x32",
         "render forward",
@@ -121,6 +127,9 @@ fn bench_train_prints_the_stages_on_a_dataset_folder_and_the_phantom() {
         "bench", "train", "--sizes", "16", "--views", "2", "--warmup", "0", "--iters", "1",
         "--volume", &missing, "--mask", &missing,
     ]);
-    assert!(out.contains("built-in phantom") && out.contains("not found"), "{out}");
+    assert!(
+        out.contains("built-in phantom") && out.contains("not found"),
+        "{out}"
+    );
     assert!(out.contains("16x16"), "{out}");
 }

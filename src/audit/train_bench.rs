@@ -19,8 +19,8 @@ use crate::dataset::generate::{self, GenerateOptions};
 use crate::dataset::Dataset;
 use crate::densify::TrainState;
 use crate::error::{Error, Result};
-use crate::gaussians::Gaussians;
 use crate::field::train::cpu_seconds;
+use crate::gaussians::Gaussians;
 use crate::train::{stages::STAGES, Method, StageTimes, TrainConfig, Trainer};
 use crate::volume::attenuation::{HuConversion, Normalization};
 use crate::volume::phantom::{self, PhantomSpec};
@@ -38,12 +38,7 @@ pub const TRAIN_VIEWS: (usize, usize) = (1, 100);
 
 /// Check the training benchmark's settings; the error names the flag, the value and the
 /// allowed range.
-pub fn check_train_cases(
-    sizes: &[usize],
-    iters: usize,
-    warmup: usize,
-    views: usize,
-) -> Result<()> {
+pub fn check_train_cases(sizes: &[usize], iters: usize, warmup: usize, views: usize) -> Result<()> {
     let check = |flag: &str, values: &[usize], (lo, hi): (usize, usize)| {
         if values.is_empty() {
             return Err(Error::invalid(flag, "needs at least one value"));

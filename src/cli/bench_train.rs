@@ -10,6 +10,9 @@ use crate::dataset::{store, Dataset};
 /// Default detector sizes.
 const SIZES: [usize; 2] = [256, 1024];
 
+/// Builds (or hands over) the dataset of one detector size.
+type MakeDataset = Box<dyn FnOnce() -> anyhow::Result<Dataset>>;
+
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let iters = args.iters.unwrap_or(30);
     let sizes = if args.sizes.is_empty() {
@@ -48,16 +51,25 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
             None => format!("a warm-up of {} iterations", args.warmup),
         }
     );
-    let datasets: Vec<(usize, Box<dyn FnOnce() -> anyhow::Result<Dataset>>)> = match &args.data {
+    let datasets: Vec<(usize, MakeDataset)> = match &args.data {
         Some(d) => {
             let ds = store::load(d).with_context(|| format!("reading --data {}", d.display()))?;
             let n = ds.geometry.n_detector;
             if n[0] != n[1] {
-                bail!("--data {}: the detector is {}x{}, not square", d.display(), n[0], n[1]);
+                bail!(
+                    "--data {}: the detector is {}x{}, not square",
+                    d.display(),
+                    n[0],
+                    n[1]
+                );
             }
             train_bench::check_train_cases(&[n[0]], iters, args.warmup, args.views)
                 .with_context(|| format!("--data {}", d.display()))?;
-            println!("dataset: {} ({} training views)", d.display(), ds.train.angles.len());
+            println!(
+                "dataset: {} ({} training views)",
+                d.display(),
+                ds.train.angles.len()
+            );
             vec![(n[0], Box::new(move || Ok(ds)))]
         }
         None => {
@@ -83,7 +95,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
                 .iter()
                 .map(|&s| {
                     let (vol, mask, views) = (args.volume.clone(), args.mask.clone(), args.views);
-                    let f: Box<dyn FnOnce() -> anyhow::Result<Dataset>> = Box::new(move || {
+                    let f: MakeDataset = Box::new(move || {
                         Ok(if ct {
                             train_bench::ct_crop_dataset(&vol, &mask, s, views)?
                         } else {
