@@ -33,6 +33,8 @@
 //! follow without densification, statistics or opacity resets.
 //!
 //! The loop with its events and files is [`session`]; the run folder is [`run_dir`].
+//! [`stages`] times the stages of [`Trainer::step`] for `unispine bench train` (off unless
+//! [`Trainer::stages`] is set; it changes no result).
 
 pub mod compact;
 pub mod config;
