@@ -384,7 +384,8 @@ fn geometry_accuracy_and_threads_are_range_checked() {
 }
 
 /// Numeric flags that would allocate without bound or never end: view counts and the
-/// projection bytes of `data`, `drr` angle counts at a large detector, `bench` cases, the
+/// projection bytes of `data`, `drr` angle counts at a large detector, `bench` cases (render
+/// and train), the
 /// iterations of a field baseline, `reproduce --jobs`. Each is refused with its allowed range.
 #[test]
 fn unbounded_numeric_flags_are_range_checked() {
@@ -439,6 +440,26 @@ fn unbounded_numeric_flags_are_range_checked() {
             &["bench", "render", "--sizes", "64", "--reps", "0"][..],
             "--reps",
             "[1, 1000]",
+        ),
+        (
+            &["bench", "train", "--sizes", "100000"][..],
+            "--sizes",
+            "[8, 2048]",
+        ),
+        (
+            &["bench", "train", "--sizes", "64", "--iters", "0"][..],
+            "--iters",
+            "[1, 100000]",
+        ),
+        (
+            &["bench", "train", "--sizes", "64", "--warmup", "1000000000"][..],
+            "--warmup",
+            "[0, 20000]",
+        ),
+        (
+            &["bench", "train", "--sizes", "64", "--views", "0"][..],
+            "--views",
+            "[1, 100]",
         ),
         (
             &["reproduce", "quick", "--jobs", "100000"][..],

@@ -7,6 +7,7 @@
 pub mod bench;
 pub mod field;
 pub mod gradcheck;
+pub mod train_bench;
 
 /// Relative error tolerance of every gradient check.
 pub const TOLERANCE: f64 = 1e-6;

@@ -16,7 +16,9 @@
 //!   peak (AVX2 and scalar paths), each preset's per-iteration time split into stages, and the
 //!   process's peak resident memory after the full NAF configuration's iterations.
 //!
-//! (A `train` kind, one full training iteration, belongs to the trainer.)
+//! - `train`: where one training iteration of the `unispine` preset goes
+//!   ([`crate::audit::train_bench`]): ms and % of the step per stage at each detector size,
+//!   CPU time, and the share outside the rasterizer against the 25 % target.
 
 use anyhow::bail;
 
@@ -28,14 +30,16 @@ use crate::render::composite;
 /// Arguments of `unispine bench`.
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
-    /// What to benchmark: `render` (rasterizer forward and forward + backward) or `field`
-    /// (neural-field baselines: MLP products, per-iteration stages, memory).
+    /// What to benchmark: `render` (rasterizer forward and forward + backward), `field`
+    /// (neural-field baselines: MLP products, per-iteration stages, memory) or `train` (one
+    /// training iteration of the `unispine` preset split into stages).
     pub kind: String,
     /// Gaussian counts (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "10000,50000,100000")]
     pub gaussians: Vec<usize>,
-    /// Square detector sizes in pixels (comma-separated).
-    #[arg(long, value_delimiter = ',', default_value = "256,512")]
+    /// Square detector sizes in pixels (comma-separated; `render`: default 256,512, `train`:
+    /// 256,1024).
+    #[arg(long, value_delimiter = ',')]
     pub sizes: Vec<usize>,
     /// Repetitions per case (the median is reported).
     #[arg(long, default_value_t = 7)]
@@ -51,9 +55,32 @@ pub struct BenchArgs {
         default_value = "naf,intratomo,nerf,naf-full,intratomo-full,nerf-full"
     )]
     pub presets: Vec<String>,
-    /// `field`: timed iterations per reduced preset (full presets: 1).
-    #[arg(long, default_value_t = 5)]
-    pub iters: usize,
+    /// Timed iterations (`field`: per reduced preset, full presets 1; default 5. `train`:
+    /// default 30).
+    #[arg(long)]
+    pub iters: Option<usize>,
+    /// `train`: a dataset folder written by `unispine data` (its detector size is the only
+    /// size; do not pass `--sizes`). Default: the CT crop built from `--volume` and `--mask`,
+    /// or the built-in phantom when those files are absent.
+    #[arg(long)]
+    pub data: Option<std::path::PathBuf>,
+    /// `train`: the CT volume of the default dataset.
+    #[arg(long, default_value = "data/cxr.nii.gz")]
+    pub volume: std::path::PathBuf,
+    /// `train`: its label volume (vertebrae 25-50 are kept, plus 10 mm).
+    #[arg(long, default_value = "data/mask.nii.gz")]
+    pub mask: std::path::PathBuf,
+    /// `train`: training views of the built dataset (one test view).
+    #[arg(long, default_value_t = 50)]
+    pub views: usize,
+    /// `train`: warm-up iterations before timing; with `--model`, the schedule position the
+    /// model starts at instead.
+    #[arg(long, default_value_t = 1000)]
+    pub warmup: usize,
+    /// `train`: start from this model (`model.ply` of a run, or its run folder) instead of
+    /// training a warm-up.
+    #[arg(long)]
+    pub model: Option<std::path::PathBuf>,
 }
 
 /// Run `unispine bench`.
@@ -61,12 +88,18 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     match args.kind.as_str() {
         "render" => run_render(&args),
         "field" => super::bench_field::run(&args),
-        k => bail!("unknown benchmark kind `{k}` (available: render, field)"),
+        "train" => super::bench_train::run(&args),
+        k => bail!("unknown benchmark kind `{k}` (available: render, field, train)"),
     }
 }
 
 fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
-    crate::audit::bench::check_render_cases(&args.gaussians, &args.sizes, args.reps)?;
+    let sizes = if args.sizes.is_empty() {
+        vec![256, 512]
+    } else {
+        args.sizes.clone()
+    };
+    crate::audit::bench::check_render_cases(&args.gaussians, &sizes, args.reps)?;
     println!(
         "render benchmark: CT-like box of {BOX_MM} mm, cone beam, f32, paper RIRF, {} threads, \
          median of {} reps",
@@ -138,7 +171,7 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
         "limit ms",
         "of limit"
     );
-    for &size in &args.sizes {
+    for &size in &sizes {
         for &n in &args.gaussians {
             let t = time_render(n, size, args.reps)?;
             let fbps = t.blends as f64 / t.forward;

@@ -22,7 +22,8 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
             );
         }
     }
-    if args.reps == 0 || args.iters == 0 {
+    let iters_per_preset = args.iters.unwrap_or(5);
+    if args.reps == 0 || iters_per_preset == 0 {
         bail!("--reps and --iters must be positive");
     }
     let simd = Simd::active();
@@ -101,7 +102,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let mut hwm_naf_full = None;
     for name in &args.presets {
         let cfg = FieldConfig::preset(name, VIEWS)?;
-        let n = if cfg.reduced { args.iters } else { 1 };
+        let n = if cfg.reduced { iters_per_preset } else { 1 };
         let t = time_iteration(&cfg, simd, n)?;
         let s = &t.stages;
         println!(

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod bench_field;
+pub mod bench_train;
 pub mod data;
 pub mod drr;
 pub mod eval;

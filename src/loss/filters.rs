@@ -5,11 +5,15 @@
 //!
 //! Every output pixel is one fixed sequential sum over the kernel taps in ascending order, so the
 //! result does not depend on how rows are spread over threads (rayon over output rows only).
+//! The loops over a row's pixels run with the widest SIMD instruction set of the CPU
+//! ([`Simd::active`]): each lane is one pixel doing the same multiplies and adds in the same
+//! order (no fused multiply-add), so every path gives the same bits.
 
 use rayon::prelude::*;
 
 use crate::image2d::Image2d;
 use crate::real::Real;
+use crate::simd::Simd;
 
 /// Normalised 1D Gaussian `exp(-(k - r)^2 / (2 sigma^2)) / sum`, `k = 0..size`, `r = size / 2`.
 /// `extra_norm_eps` is added to the normalising sum (the UniSpine-GS blur adds 1e-12; the SSIM
@@ -30,57 +34,111 @@ fn cast_kernel<R: Real>(k: &[f64]) -> Vec<R> {
     k.iter().map(|&v| R::c(v)).collect()
 }
 
+/// One output row of [`correlate_rows`] (`o` zeroed, `xi` the input row).
+#[inline(always)]
+fn row_kernel<R: Real>(o: &mut [R], xi: &[R], k: &[R]) {
+    let w = o.len();
+    let r = k.len() / 2;
+    // Per pixel: acc = 0 + k[t_lo] x[..] + k[t_lo + 1] x[..] + ..., taps ascending (the loop
+    // runs over taps outside and pixels inside so that it vectorises).
+    for (t, &kt) in k.iter().enumerate() {
+        // Pixels j with 0 <= j + t - r < w.
+        let j_lo = r.saturating_sub(t);
+        let j_hi = w.min((w + r).saturating_sub(t));
+        if j_lo >= j_hi {
+            continue;
+        }
+        let src = &xi[j_lo + t - r..j_hi + t - r];
+        for (oj, &xj) in o[j_lo..j_hi].iter_mut().zip(src) {
+            *oj += kt * xj;
+        }
+    }
+}
+
+/// Output row `i` of [`correlate_cols`] (`o` zeroed) from the whole input `x` of height `h`.
+#[inline(always)]
+fn col_kernel<R: Real>(o: &mut [R], x: &[R], h: usize, i: usize, k: &[R]) {
+    let w = o.len();
+    let r = k.len() / 2;
+    let t_lo = r.saturating_sub(i);
+    let t_hi = k.len().min(h + r - i);
+    // Per pixel: acc = 0 + k[t_lo] x[..] + k[t_lo + 1] x[..] + ..., taps ascending.
+    for (t, &kt) in k.iter().enumerate().take(t_hi).skip(t_lo) {
+        let src = &x[(i + t - r) * w..(i + t - r + 1) * w];
+        for (oj, &xj) in o.iter_mut().zip(src) {
+            *oj += kt * xj;
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn row_kernel_avx2<R: Real>(o: &mut [R], xi: &[R], k: &[R]) {
+    row_kernel(o, xi, k)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
+unsafe fn row_kernel_avx512<R: Real>(o: &mut [R], xi: &[R], k: &[R]) {
+    row_kernel(o, xi, k)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn col_kernel_avx2<R: Real>(o: &mut [R], x: &[R], h: usize, i: usize, k: &[R]) {
+    col_kernel(o, x, h, i, k)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
+unsafe fn col_kernel_avx512<R: Real>(o: &mut [R], x: &[R], h: usize, i: usize, k: &[R]) {
+    col_kernel(o, x, h, i, k)
+}
+
 /// 1D correlation of every row with `k` (odd length, centre `k.len() / 2`), zero padding:
 /// `out[i][j] = sum_t k[t] x[i][j + t - r]`.
-fn correlate_rows<R: Real>(x: &Image2d<R>, k: &[R]) -> Image2d<R> {
+fn correlate_rows<R: Real>(simd: Simd, x: &Image2d<R>, k: &[R]) -> Image2d<R> {
     let (w, h) = (x.width, x.height);
-    let r = k.len() / 2;
     let mut out = Image2d::filled(w, h, R::zero());
     if w == 0 || h == 0 {
         return out;
     }
+    let simd = simd.or_narrower();
     out.data
         .par_chunks_mut(w)
         .zip(x.data.par_chunks(w))
-        .for_each(|(o, xi)| {
-            // Per pixel: acc = 0 + k[t_lo] x[..] + k[t_lo + 1] x[..] + ..., taps ascending (the
-            // loop runs over taps outside and pixels inside so that it vectorises).
-            for (t, &kt) in k.iter().enumerate() {
-                // Pixels j with 0 <= j + t - r < w.
-                let j_lo = r.saturating_sub(t);
-                let j_hi = w.min((w + r).saturating_sub(t));
-                if j_lo >= j_hi {
-                    continue;
-                }
-                let src = &xi[j_lo + t - r..j_hi + t - r];
-                for (oj, &xj) in o[j_lo..j_hi].iter_mut().zip(src) {
-                    *oj += kt * xj;
-                }
-            }
+        .for_each(|(o, xi)| match simd {
+            // SAFETY: `or_narrower` returns an instruction set the CPU supports.
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => unsafe { row_kernel_avx512(o, xi, k) },
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { row_kernel_avx2(o, xi, k) },
+            _ => row_kernel(o, xi, k),
         });
     out
 }
 
 /// 1D correlation of every column with `k`, zero padding:
 /// `out[i][j] = sum_t k[t] x[i + t - r][j]`.
-fn correlate_cols<R: Real>(x: &Image2d<R>, k: &[R]) -> Image2d<R> {
+fn correlate_cols<R: Real>(simd: Simd, x: &Image2d<R>, k: &[R]) -> Image2d<R> {
     let (w, h) = (x.width, x.height);
-    let r = k.len() / 2;
     let mut out = Image2d::filled(w, h, R::zero());
     if w == 0 || h == 0 {
         return out;
     }
-    out.data.par_chunks_mut(w).enumerate().for_each(|(i, o)| {
-        let t_lo = r.saturating_sub(i);
-        let t_hi = k.len().min(h + r - i);
-        // Per pixel: acc = 0 + k[t_lo] x[..] + k[t_lo + 1] x[..] + ..., taps ascending.
-        for (t, &kt) in k.iter().enumerate().take(t_hi).skip(t_lo) {
-            let src = &x.data[(i + t - r) * w..(i + t - r + 1) * w];
-            for (oj, &xj) in o.iter_mut().zip(src) {
-                *oj += kt * xj;
-            }
-        }
-    });
+    let simd = simd.or_narrower();
+    let xd = &x.data;
+    out.data
+        .par_chunks_mut(w)
+        .enumerate()
+        .for_each(|(i, o)| match simd {
+            // SAFETY: `or_narrower` returns an instruction set the CPU supports.
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => unsafe { col_kernel_avx512(o, xd, h, i, k) },
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { col_kernel_avx2(o, xd, h, i, k) },
+            _ => col_kernel(o, xd, h, i, k),
+        });
     out
 }
 
@@ -91,15 +149,36 @@ fn reversed<R: Real>(k: &[R]) -> Vec<R> {
 /// Separable correlation: rows with `k_row` first, then columns with `k_col` (zero padding).
 /// With zero padding this equals the 2D correlation with the outer product `k_col k_row^T`.
 pub fn correlate_sep<R: Real>(x: &Image2d<R>, k_row: &[f64], k_col: &[f64]) -> Image2d<R> {
-    let t = correlate_rows(x, &cast_kernel::<R>(k_row));
-    correlate_cols(&t, &cast_kernel::<R>(k_col))
+    correlate_sep_with(Simd::active(), x, k_row, k_col)
+}
+
+/// [`correlate_sep`] with the instruction set `simd` (or the widest supported narrower one);
+/// every path gives the same bits.
+pub fn correlate_sep_with<R: Real>(
+    simd: Simd,
+    x: &Image2d<R>,
+    k_row: &[f64],
+    k_col: &[f64],
+) -> Image2d<R> {
+    let t = correlate_rows(simd, x, &cast_kernel::<R>(k_row));
+    correlate_cols(simd, &t, &cast_kernel::<R>(k_col))
 }
 
 /// Adjoint of [`correlate_sep`]: `<correlate_sep(x), y> = <x, correlate_sep_adjoint(y)>`
 /// (correlation with the reversed kernels, in the reverse order).
 pub fn correlate_sep_adjoint<R: Real>(y: &Image2d<R>, k_row: &[f64], k_col: &[f64]) -> Image2d<R> {
-    let t = correlate_cols(y, &reversed(&cast_kernel::<R>(k_col)));
-    correlate_rows(&t, &reversed(&cast_kernel::<R>(k_row)))
+    correlate_sep_adjoint_with(Simd::active(), y, k_row, k_col)
+}
+
+/// [`correlate_sep_adjoint`] with the instruction set `simd` (same bits on every path).
+pub fn correlate_sep_adjoint_with<R: Real>(
+    simd: Simd,
+    y: &Image2d<R>,
+    k_row: &[f64],
+    k_col: &[f64],
+) -> Image2d<R> {
+    let t = correlate_cols(simd, y, &reversed(&cast_kernel::<R>(k_col)));
+    correlate_rows(simd, &t, &reversed(&cast_kernel::<R>(k_row)))
 }
 
 /// Separable Gaussian blur with the 1D kernel `k` on both axes (zero padding).
@@ -234,6 +313,29 @@ mod tests {
         assert!((k[0] - 0.3078).abs() < 1e-4 && (k[1] - 0.3844).abs() < 1e-4);
         let k11 = gaussian_kernel(11, 1.5, 0.0);
         assert!((k11.iter().sum::<f64>() - 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn every_simd_path_gives_the_same_bits() {
+        // Widths that leave remainders for every lane count, a kernel longer than the image.
+        let bits = |im: &Image2d<f32>| im.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let k = gaussian_kernel(11, 1.5, 0.0);
+        let kr = [0.3, -1.0, 0.25, 2.0, 0.5, -0.1, 0.7];
+        for (w, h) in [(203, 77), (37, 5), (4, 9), (1, 1)] {
+            let x: Image2d<f32> = random(w, h, 6).cast();
+            let want = (
+                correlate_sep_with(Simd::Scalar, &x, &kr, &k),
+                correlate_sep_adjoint_with(Simd::Scalar, &x, &kr, &k),
+            );
+            for p in Simd::ALL {
+                let got = (
+                    correlate_sep_with(p, &x, &kr, &k),
+                    correlate_sep_adjoint_with(p, &x, &kr, &k),
+                );
+                assert_eq!(bits(&got.0), bits(&want.0), "{p:?} {w}x{h}");
+                assert_eq!(bits(&got.1), bits(&want.1), "{p:?} {w}x{h}");
+            }
+        }
     }
 
     #[test]

@@ -24,7 +24,7 @@ use rayon::prelude::*;
 
 use super::filters::{blur, blur_adjoint, gaussian_kernel};
 use crate::image2d::Image2d;
-use crate::par::det_sum_by;
+use crate::par::{det_sum_by, CHUNK};
 use crate::real::Real;
 
 /// Window side (11) and Gaussian sigma (1.5).
@@ -121,30 +121,42 @@ pub fn ssim_forward_backward<R: Real>(x: &Image2d<R>, y: &Image2d<R>) -> (f64, I
     let s = stats(x, y, &k);
     let n = x.data.len();
     let inv_n = R::c(1.0 / n as f64);
-    // Per pixel: S and the three partials (already divided by N).
-    let per: Vec<(R, R, R, R)> = (0..n)
-        .into_par_iter()
-        .map(|p| {
-            let (mx, my, a1, a2, b1, b2) = terms(&s, p);
-            // S exactly as in `ssim_map` (so the value is bit-identical to `ssim`); the
-            // partials with two reciprocals instead of five divisions.
-            let sv = (a1 * a2) / (b1 * b2);
-            let (ib1, ib2) = (R::one() / b1, R::one() / b2);
-            let ib = ib1 * ib2;
-            let two = R::c(2.0);
-            let d_mu = two * my * (a2 - a1) * ib - two * mx * sv * (ib1 - ib2);
-            let d_exx = -sv * ib2;
-            let d_exy = two * a1 * ib;
-            (sv, d_mu * inv_n, d_exx * inv_n, d_exy * inv_n)
-        })
-        .collect();
-    let value = det_sum_by(n, |p| per[p].0.f64()) / n as f64;
-    let img = |f: fn(&(R, R, R, R)) -> R| {
-        Image2d::from_vec(x.width, x.height, per.iter().map(f).collect::<Vec<R>>())
-    };
-    let g_mu = blur_adjoint(&img(|t| t.1), &k);
-    let g_xx = blur_adjoint(&img(|t| t.2), &k);
-    let g_xy = blur_adjoint(&img(|t| t.3), &k);
+    // Per pixel: S and the three partials (already divided by N), written straight into their
+    // images.
+    let zero = R::zero();
+    let (mut sv_img, mut d_mu_img, mut d_xx_img, mut d_xy_img) =
+        (vec![zero; n], vec![zero; n], vec![zero; n], vec![zero; n]);
+    sv_img
+        .par_chunks_mut(CHUNK)
+        .zip(d_mu_img.par_chunks_mut(CHUNK))
+        .zip(d_xx_img.par_chunks_mut(CHUNK))
+        .zip(d_xy_img.par_chunks_mut(CHUNK))
+        .enumerate()
+        .for_each(|(c, (((o_s, o_mu), o_xx), o_xy))| {
+            for q in 0..o_s.len() {
+                let p = c * CHUNK + q;
+                let (mx, my, a1, a2, b1, b2) = terms(&s, p);
+                // S exactly as in `ssim_map` (so the value is bit-identical to `ssim`); the
+                // partials with two reciprocals instead of five divisions.
+                let sv = (a1 * a2) / (b1 * b2);
+                let (ib1, ib2) = (R::one() / b1, R::one() / b2);
+                let ib = ib1 * ib2;
+                let two = R::c(2.0);
+                let d_mu = two * my * (a2 - a1) * ib - two * mx * sv * (ib1 - ib2);
+                let d_exx = -sv * ib2;
+                let d_exy = two * a1 * ib;
+                o_s[q] = sv;
+                o_mu[q] = d_mu * inv_n;
+                o_xx[q] = d_exx * inv_n;
+                o_xy[q] = d_exy * inv_n;
+            }
+        });
+    let value = det_sum_by(n, |p| sv_img[p].f64()) / n as f64;
+    let img = |v: Vec<R>| Image2d::from_vec(x.width, x.height, v);
+    let (d_mu_img, d_xx_img, d_xy_img) = (img(d_mu_img), img(d_xx_img), img(d_xy_img));
+    let g_mu = blur_adjoint(&d_mu_img, &k);
+    let g_xx = blur_adjoint(&d_xx_img, &k);
+    let g_xy = blur_adjoint(&d_xy_img, &k);
     let two = R::c(2.0);
     let data = (0..n)
         .into_par_iter()

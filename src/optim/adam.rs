@@ -22,6 +22,7 @@ use crate::gaussians::model::N_FEATURES;
 use crate::gaussians::Gaussians;
 use crate::par::CHUNK;
 use crate::real::Real;
+use crate::simd::Simd;
 
 /// Number of parameter groups.
 pub const N_GROUPS: usize = 6;
@@ -88,8 +89,87 @@ fn upd<R: Real>(c: &Consts<R>, p: &mut R, m: &mut R, v: &mut R, g: R) {
     *p -= c.step_size * (*m / denom);
 }
 
-/// Adam update of elements `range` of every row of one array-valued group.
+/// Adam update of elements `range` of every row of a chunk of an array-valued group.
+#[inline(always)]
+fn rows_kernel<R: Real, const N: usize>(
+    c: &Consts<R>,
+    pc: &mut [[R; N]],
+    mc: &mut [[R; N]],
+    vc: &mut [[R; N]],
+    gc: &[[R; N]],
+    range: std::ops::Range<usize>,
+) {
+    for j in 0..pc.len() {
+        for a in range.clone() {
+            upd(c, &mut pc[j][a], &mut mc[j][a], &mut vc[j][a], gc[j][a]);
+        }
+    }
+}
+
+/// Adam update of every element of a chunk of a contiguous group (each element independent,
+/// so the loop vectorises across elements).
+#[inline(always)]
+fn flat_kernel<R: Real>(c: &Consts<R>, pc: &mut [R], mc: &mut [R], vc: &mut [R], gc: &[R]) {
+    for (((p, m), v), &g) in pc.iter_mut().zip(mc.iter_mut()).zip(vc.iter_mut()).zip(gc) {
+        upd(c, p, m, v, g);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn rows_kernel_avx2<R: Real, const N: usize>(
+    c: &Consts<R>,
+    pc: &mut [[R; N]],
+    mc: &mut [[R; N]],
+    vc: &mut [[R; N]],
+    gc: &[[R; N]],
+    range: std::ops::Range<usize>,
+) {
+    rows_kernel(c, pc, mc, vc, gc, range)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
+unsafe fn rows_kernel_avx512<R: Real, const N: usize>(
+    c: &Consts<R>,
+    pc: &mut [[R; N]],
+    mc: &mut [[R; N]],
+    vc: &mut [[R; N]],
+    gc: &[[R; N]],
+    range: std::ops::Range<usize>,
+) {
+    rows_kernel(c, pc, mc, vc, gc, range)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn flat_kernel_avx2<R: Real>(
+    c: &Consts<R>,
+    pc: &mut [R],
+    mc: &mut [R],
+    vc: &mut [R],
+    gc: &[R],
+) {
+    flat_kernel(c, pc, mc, vc, gc)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
+unsafe fn flat_kernel_avx512<R: Real>(
+    c: &Consts<R>,
+    pc: &mut [R],
+    mc: &mut [R],
+    vc: &mut [R],
+    gc: &[R],
+) {
+    flat_kernel(c, pc, mc, vc, gc)
+}
+
+/// Adam update of elements `range` of every row of one array-valued group, with the
+/// instruction set `simd` (supported; every path gives the same bits: each element does the
+/// same operations). A group updated whole runs as one flat array.
 fn group_step<R: Real, const N: usize>(
+    simd: Simd,
     c: &Consts<R>,
     p: &mut [[R; N]],
     m: &mut [[R; N]],
@@ -100,16 +180,49 @@ fn group_step<R: Real, const N: usize>(
     if !c.on {
         return;
     }
+    if range == (0..N) {
+        return flat_step(
+            simd,
+            c,
+            p.as_flattened_mut(),
+            m.as_flattened_mut(),
+            v.as_flattened_mut(),
+            g.as_flattened(),
+        );
+    }
     p.par_chunks_mut(CHUNK)
         .zip(m.par_chunks_mut(CHUNK))
         .zip(v.par_chunks_mut(CHUNK))
         .zip(g.par_chunks(CHUNK))
         .for_each(|(((pc, mc), vc), gc)| {
-            for j in 0..pc.len() {
-                for a in range.clone() {
-                    upd(c, &mut pc[j][a], &mut mc[j][a], &mut vc[j][a], gc[j][a]);
-                }
+            let r = range.clone();
+            match simd {
+                // SAFETY: the caller passes a supported instruction set.
+                #[cfg(target_arch = "x86_64")]
+                Simd::Avx512 => unsafe { rows_kernel_avx512(c, pc, mc, vc, gc, r) },
+                #[cfg(target_arch = "x86_64")]
+                Simd::Avx2 => unsafe { rows_kernel_avx2(c, pc, mc, vc, gc, r) },
+                _ => rows_kernel(c, pc, mc, vc, gc, r),
             }
+        });
+}
+
+/// Adam update of every element of a flat group with the instruction set `simd` (supported).
+fn flat_step<R: Real>(simd: Simd, c: &Consts<R>, p: &mut [R], m: &mut [R], v: &mut [R], g: &[R]) {
+    if !c.on {
+        return;
+    }
+    p.par_chunks_mut(CHUNK)
+        .zip(m.par_chunks_mut(CHUNK))
+        .zip(v.par_chunks_mut(CHUNK))
+        .zip(g.par_chunks(CHUNK))
+        .for_each(|(((pc, mc), vc), gc)| match simd {
+            // SAFETY: the caller passes a supported instruction set.
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => unsafe { flat_kernel_avx512(c, pc, mc, vc, gc) },
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { flat_kernel_avx2(c, pc, mc, vc, gc) },
+            _ => flat_kernel(c, pc, mc, vc, gc),
         });
 }
 
@@ -143,7 +256,7 @@ impl<R: Real> Adam<R> {
 
     /// One Adam step of the groups with `active[g] == true`, learning rates `lr`.
     /// Parallel over fixed chunks of Gaussians; each element is independent, so the result is
-    /// bit-identical for any thread count.
+    /// bit-identical for any thread count and on every SIMD path ([`Simd::active`]).
     pub fn step(
         &mut self,
         p: &mut Gaussians<R>,
@@ -151,6 +264,19 @@ impl<R: Real> Adam<R> {
         lr: &GroupLr,
         active: &[bool; N_GROUPS],
     ) {
+        self.step_with(Simd::active(), p, grad, lr, active)
+    }
+
+    /// [`Adam::step`] with the instruction set `simd` (or the widest supported narrower one).
+    pub fn step_with(
+        &mut self,
+        simd: Simd,
+        p: &mut Gaussians<R>,
+        grad: &Gaussians<R>,
+        lr: &GroupLr,
+        active: &[bool; N_GROUPS],
+    ) {
+        let simd = simd.or_narrower();
         let n = p.len();
         assert!(
             grad.len() == n && self.m.len() == n && self.v.len() == n,
@@ -160,6 +286,7 @@ impl<R: Real> Adam<R> {
         let (m, v) = (&mut self.m, &mut self.v);
         let kx = &k[Group::Xyz as usize];
         group_step(
+            simd,
             kx,
             &mut p.means,
             &mut m.means,
@@ -169,9 +296,10 @@ impl<R: Real> Adam<R> {
         );
         let ks = &k[Group::Scaling as usize];
         let (ps, ms, vs) = (&mut p.log_scales, &mut m.log_scales, &mut v.log_scales);
-        group_step(ks, ps, ms, vs, &grad.log_scales, 0..3);
+        group_step(simd, ks, ps, ms, vs, &grad.log_scales, 0..3);
         let kr = &k[Group::Rotation as usize];
         group_step(
+            simd,
             kr,
             &mut p.quats,
             &mut m.quats,
@@ -185,22 +313,12 @@ impl<R: Real> Adam<R> {
             &mut m.opacity_logits,
             &mut v.opacity_logits,
         );
-        if ko.on {
-            po.par_chunks_mut(CHUNK)
-                .zip(mo.par_chunks_mut(CHUNK))
-                .zip(vo.par_chunks_mut(CHUNK))
-                .zip(grad.opacity_logits.par_chunks(CHUNK))
-                .for_each(|(((pc, mc), vc), gc)| {
-                    for j in 0..pc.len() {
-                        upd(ko, &mut pc[j], &mut mc[j], &mut vc[j], gc[j]);
-                    }
-                });
-        }
+        flat_step(simd, ko, po, mo, vo, &grad.opacity_logits);
         let kd = &k[Group::FDc as usize];
         let (pf, mf, vf) = (&mut p.features, &mut m.features, &mut v.features);
-        group_step(kd, pf, mf, vf, &grad.features, 0..1);
+        group_step(simd, kd, pf, mf, vf, &grad.features, 0..1);
         let kf = &k[Group::FRest as usize];
-        group_step(kf, pf, mf, vf, &grad.features, 1..N_FEATURES);
+        group_step(simd, kf, pf, mf, vf, &grad.features, 1..N_FEATURES);
         for (steps, &on) in self.steps.iter_mut().zip(active) {
             if on {
                 *steps += 1;

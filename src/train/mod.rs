@@ -33,7 +33,8 @@
 //! follow without densification, statistics or opacity resets.
 //!
 //! The loop with its events and files is [`session`]; the run folder is [`run_dir`], its
-//! resumable state [`checkpoint`].
+//! resumable state [`checkpoint`]. [`stages`] times the stages of [`Trainer::step`] for
+//! `unispine bench train` (off unless [`Trainer::stages`] is set; it changes no result).
 
 pub mod checkpoint;
 pub mod compact;
@@ -42,6 +43,7 @@ pub mod event;
 pub mod run_dir;
 pub mod session;
 pub mod settings;
+pub mod stages;
 
 use std::time::Instant;
 
@@ -63,6 +65,7 @@ pub use event::Event;
 pub use run_dir::{Checkpoint, EvalPoint, Metrics, RunDir};
 pub use session::{resume, run, run_with, Control};
 pub use settings::TrainOverrides;
+pub use stages::StageTimes;
 
 /// Scene extent: 1.1 x max distance of the camera centres from their mean (3DGS
 /// `getNerfppNorm`, used as `spatial_lr_scale` and in the densification thresholds).
@@ -125,6 +128,9 @@ pub struct Trainer<'a> {
     pub iteration: usize,
     /// What the compaction did, once it has run.
     pub compaction: Option<compact::Compaction>,
+    /// Stage timers of [`Trainer::step`] (`None`, the default: not timed). Timing changes no
+    /// result.
+    pub stages: Option<StageTimes>,
     stack: Vec<usize>,
     rng: ChaCha8Rng,
 }
@@ -168,6 +174,7 @@ impl<'a> Trainer<'a> {
             extent,
             iteration: 0,
             compaction: None,
+            stages: None,
             stack: Vec::new(),
         })
     }
@@ -300,6 +307,8 @@ impl<'a> Trainer<'a> {
 
     /// Run iteration `self.iteration + 1`.
     pub fn step(&mut self) -> Result<StepInfo> {
+        let mut laps = stages::Laps::new(self.stages.is_some());
+        let mut t = stages::Recorder::default();
         let it = self.iteration + 1;
         let cfg = &self.cfg;
         let lr = cfg.lr.at(it, self.extent);
@@ -313,6 +322,7 @@ impl<'a> Trainer<'a> {
         let cam = self.ds.train_camera(view);
         let (img, saved) = render::forward(&self.state.params, &cam, &settings)
             .map_err(|e| diverged(format!("rendering training view {view}: {e}")))?;
+        t.set(|s| &mut s.render_forward, laps.lap());
         if saved.splats.radius.iter().all(|&r| r == 0) {
             return Err(diverged(format!(
                 "nothing is rendered in training view {view}: none of the {} Gaussians is visible",
@@ -328,6 +338,7 @@ impl<'a> Trainer<'a> {
             _ => None,
         };
         let (lv, d_img) = loss::forward_backward(&img, gt, weights.as_ref(), &cfg.loss);
+        t.set(|s| &mut s.loss, laps.lap());
         if !lv.total.is_finite() {
             return Err(diverged(format!(
                 "loss is {} on training view {view}",
@@ -335,10 +346,12 @@ impl<'a> Trainer<'a> {
             )));
         }
         let grads = render::backward(&self.state.params, &cam, &settings, &saved, &d_img);
+        t.set(|s| &mut s.render_backward, laps.lap());
         if let Err(e) = grads.params.check_finite() {
             return Err(diverged(format!("gradient on training view {view}: {e}")));
         }
         let psnr = eval::psnr(&eval::clamp01(&img), gt);
+        laps.lap();
         let eval = if cfg.is_eval_point(it) {
             let te = Instant::now();
             let result =
@@ -351,6 +364,7 @@ impl<'a> Trainer<'a> {
         } else {
             None
         };
+        t.set(|s| &mut s.eval, laps.lap());
         let d = &cfg.densify;
         let last = it == cfg.total_iterations();
         let mut active = [!last; N_GROUPS];
@@ -373,6 +387,7 @@ impl<'a> Trainer<'a> {
         } else if d.collects(it) && !last && compact_at.is_none_or(|a| it < a) {
             self.state.accumulate(&grads.mean2d_ndc_norm, &grads.radius);
             if d.densifies(it) {
+                t.set(|s| &mut s.densify, laps.lap());
                 let seed = cfg.seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ it as u64;
                 densified =
                     Some(
@@ -380,16 +395,22 @@ impl<'a> Trainer<'a> {
                             .densify_and_prune(d, self.extent, d.prunes_big(it), seed),
                     );
                 active = [false; N_GROUPS];
+                let e = laps.lap();
+                t.set(|s| &mut s.densify_events, e);
+                t.add(|s| &mut s.densify, e);
+                t.0.n_densify_events = 1;
             }
             if d.resets(it) {
                 self.state.reset_opacity(d.reset_opacity_to);
                 active[Group::Opacity as usize] = false;
             }
         }
+        t.add(|s| &mut s.densify, laps.lap());
         if active.iter().any(|&a| a) {
             let st = &mut self.state;
             st.adam.step(&mut st.params, &grads.params, &lr, &active);
         }
+        t.set(|s| &mut s.adam, laps.lap());
         if let Err(e) = self.state.params.check_finite() {
             return Err(diverged(format!(
                 "parameter after the update on training view {view}: {e}"
@@ -403,6 +424,11 @@ impl<'a> Trainer<'a> {
             )));
         }
         self.iteration = it;
+        if let Some(s) = &mut self.stages {
+            t.set(|s| &mut s.step, laps.total());
+            t.0.steps = 1;
+            s.add(&t.0);
+        }
         Ok(StepInfo {
             iteration: it,
             view,
