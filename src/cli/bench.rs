@@ -22,7 +22,9 @@ use anyhow::bail;
 
 use std::time::Instant;
 
-use crate::audit::bench::{process_cpu_seconds, time_naive, time_render, BOX_MM};
+use crate::audit::bench::{
+    process_cpu_seconds, time_naive, time_render, RenderTiming, BOX_MM, RENDER_PHASES,
+};
 use crate::render::composite;
 
 /// Arguments of `unispine bench`.
@@ -163,6 +165,7 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
             )
             .replace("NaN", "-");
             println!("{line}");
+            print_phases(&t);
         }
     }
     println!(
@@ -170,4 +173,30 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
          time (all threads) per forward + backward (mean over the reps)"
     );
     Ok(())
+}
+
+/// The per-phase times of one case and the lane use of the tile kernels.
+fn print_phases(t: &RenderTiming) {
+    let p = &t.phases;
+    let (cpu, wall): (f64, f64) = (p.cpu.iter().sum(), p.wall.iter().sum());
+    let cells: Vec<String> = RENDER_PHASES
+        .iter()
+        .zip(p.cpu.iter().zip(&p.wall))
+        .map(|(n, (c, w))| format!("{n} {:.1}/{:.1}", c * 1e3, w * 1e3))
+        .collect();
+    println!(
+        "  phases, cpu/wall ms per forward + backward (total {:.1}/{:.1}): {}",
+        cpu * 1e3,
+        wall * 1e3,
+        cells.join(", ")
+    );
+    for (name, w) in [("forward", p.forward_work), ("backward", p.backward_work)] {
+        println!(
+            "  {name} tiles: {} entries, {} entry rows, {} lanes evaluated, {:.1}% of them blends",
+            w.entries,
+            w.rows,
+            w.lanes,
+            100.0 * t.blends as f64 / w.lanes as f64
+        );
+    }
 }

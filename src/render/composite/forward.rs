@@ -9,7 +9,7 @@ use super::super::lanes::{exp_k, mask, power_of, sel};
 use super::super::tiles::{self, TileBins, TILE};
 use super::dispatch::{self, Kernel};
 use super::worklist::{half_bits, halves, pack, tile_entries, Entry, Packed, WorkLists};
-use super::{CompositeSaved, Splats, ALPHA_MAX, ALPHA_MIN, TP, T_MIN};
+use super::{CompositeSaved, KernelWork, Phase, Splats, ALPHA_MAX, ALPHA_MIN, TP, T_MIN};
 use crate::image2d::Image2d;
 use crate::real::Real;
 use crate::simd::Simd;
@@ -21,6 +21,7 @@ pub(super) struct TileOut<R> {
     t: [R; TP],
     last: [u32; TP],
     blends: u64,
+    stats: KernelWork,
     work: Vec<Entry<R>>,
 }
 
@@ -43,6 +44,7 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
         t: [R::one(); TP],
         last: [0u32; TP],
         blends: 0,
+        stats: KernelWork::default(),
         work: Vec::new(),
     };
     let mut done = [0u32; TP];
@@ -73,6 +75,7 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
         };
         let mut bits = 0u32;
         let tag = j as u32 + 1;
+        out.stats.entries += 1;
         let (k0, k1) = (e.x0 as usize - x0, e.x1 as usize - x0);
         let colm: [u32; TILE] = std::array::from_fn(|k| mask(k0 <= k && k < k1));
         for row in e.y0 as usize..e.y1 as usize {
@@ -80,6 +83,7 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
             if *hd == half_len {
                 continue;
             }
+            out.stats.rows += 1;
             let dy = R::c(row as f64) + half - e.my;
             let base = (row - y0) * TILE;
             let hv = halves(chord, row, x0);
@@ -90,6 +94,7 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
                 if !go[h0..h0 + W / 8].iter().any(|&g| g) {
                     continue;
                 }
+                out.stats.lanes += W as u64;
                 // Lanes in the entry's box and in a half that meets the chord (with 8 lanes
                 // the half is visited only when it meets it).
                 let act: [u32; W] = if W == 8 {
@@ -176,6 +181,19 @@ pub fn forward_with<R: Real>(
     forward_kernel(Kernel::of(simd), splats, width, height, background)
 }
 
+/// [`forward`] calling `probe` as each of its phases ends ([`Phase::Bin`] to
+/// [`Phase::Assemble`]), e.g. to time them. Same result as [`forward`].
+pub fn forward_probed<R: Real>(
+    splats: &Splats<R>,
+    width: usize,
+    height: usize,
+    background: R,
+    probe: &mut dyn FnMut(Phase),
+) -> (Image2d<R>, CompositeSaved<R>) {
+    let k = Kernel::of(Simd::active());
+    forward_kernel_probed(k, splats, width, height, background, probe)
+}
+
 pub(crate) fn forward_kernel<R: Real>(
     kernel: Kernel,
     splats: &Splats<R>,
@@ -183,12 +201,26 @@ pub(crate) fn forward_kernel<R: Real>(
     height: usize,
     background: R,
 ) -> (Image2d<R>, CompositeSaved<R>) {
+    forward_kernel_probed(kernel, splats, width, height, background, &mut |_| {})
+}
+
+fn forward_kernel_probed<R: Real>(
+    kernel: Kernel,
+    splats: &Splats<R>,
+    width: usize,
+    height: usize,
+    background: R,
+    probe: &mut dyn FnMut(Phase),
+) -> (Image2d<R>, CompositeSaved<R>) {
     let bins = tiles::bin(splats, width, height);
+    probe(Phase::Bin);
     let packed = pack(splats, &bins);
+    probe(Phase::Pack);
     let mut outs: Vec<TileOut<R>> = (0..bins.n_tiles())
         .into_par_iter()
         .map(|t| dispatch::forward_tile(kernel, &packed, &bins, t))
         .collect();
+    probe(Phase::ForwardTiles);
     let work = WorkLists {
         tiles: outs
             .iter_mut()
@@ -199,8 +231,10 @@ pub(crate) fn forward_kernel<R: Real>(
     let mut final_t = vec![R::one(); width * height];
     let mut n_contrib = vec![0u32; width * height];
     let mut blends = 0;
+    let mut forward_work = KernelWork::default();
     for (t, o) in outs.iter().enumerate() {
         blends += o.blends;
+        forward_work += o.stats;
         let [x0, x1, y0, y1] = bins.pixel_rect(t);
         for row in y0..y1 {
             for col in x0..x1 {
@@ -212,15 +246,15 @@ pub(crate) fn forward_kernel<R: Real>(
             }
         }
     }
-    (
-        img,
-        CompositeSaved {
-            bins,
-            background,
-            final_t,
-            n_contrib,
-            blends,
-            work,
-        },
-    )
+    let saved = CompositeSaved {
+        bins,
+        background,
+        final_t,
+        n_contrib,
+        blends,
+        forward_work,
+        work,
+    };
+    probe(Phase::Assemble);
+    (img, saved)
 }
