@@ -62,7 +62,7 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
     let entries: &[Entry<R>] = if saved.work.tiles.len() == bins.n_tiles() {
         &saved.work.tiles[t]
     } else {
-        built = tile_entries(packed, bins, t, true);
+        built = tile_entries(packed, bins, t);
         &built
     };
     let (amax, amin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN));

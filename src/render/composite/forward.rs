@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use super::super::lanes::{exp_k, mask, power_of, sel};
 use super::super::tiles::{self, TileBins, TILE};
 use super::dispatch::{self, Kernel};
-use super::worklist::{half_bits, halves, pack, tile_entries, Entry, Packed, WorkLists};
+use super::worklist::{pack, tile_entries, Entry, Packed, WorkLists};
 use super::{CompositeSaved, KernelWork, Phase, Splats, ALPHA_MAX, ALPHA_MIN, TP, T_MIN};
 use crate::image2d::Image2d;
 use crate::real::Real;
@@ -48,6 +48,8 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
         work: Vec::new(),
     };
     let mut done = [0u32; TP];
+    // Blends per pixel (summed at the end of the tile: no horizontal sum per lane vector).
+    let mut nblend = [0u32; TP];
     let mut n_done = 0u32;
     // Pixels done per 8-column half of each tile row; a half (or row) whose pixels are all
     // done is skipped: every lane would fail the `!done` test, so skipping it changes no bit.
@@ -62,18 +64,11 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
     // The whole work list is gathered first (independent loads, so the cache misses of the
     // random per-splat reads overlap); its prefix up to the largest n_contrib is kept for the
     // backward.
-    let mut entries = tile_entries(packed, bins, t, false);
-    for (j, e) in entries.iter_mut().enumerate() {
+    let mut entries = tile_entries(packed, bins, t);
+    for (j, e) in entries.iter().enumerate() {
         if n_done == npix {
             break;
         }
-        // The chord test of each visited row, recorded in `halves` for the backward. A row the
-        // forward skips here (all its pixels done before entry j) has n_contrib <= j at every
-        // pixel, so the backward skips it too and its bits are never read.
-        let Some(Packed { chord, .. }) = packed[e.id as usize].as_ref() else {
-            unreachable!("work-list entries come from packed splats")
-        };
-        let mut bits = 0u32;
         let tag = j as u32 + 1;
         out.stats.entries += 1;
         let (k0, k1) = (e.x0 as usize - x0, e.x1 as usize - x0);
@@ -86,8 +81,8 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
             out.stats.rows += 1;
             let dy = R::c(row as f64) + half - e.my;
             let base = (row - y0) * TILE;
-            let hv = halves(chord, row, x0);
-            bits |= half_bits(hv, row - y0);
+            let r2 = 2 * (row - y0);
+            let hv = [e.halves >> r2 & 1 != 0, e.halves >> (r2 + 1) & 1 != 0];
             let go = [hv[0] && hd[0] != half_len[0], hv[1] && hd[1] != half_len[1]];
             for v in 0..TILE / W {
                 let (c0, h0) = (v * W, v * W / 8);
@@ -102,14 +97,13 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
                 } else {
                     std::array::from_fn(|k| colm[c0 + k] & mask(hv[(c0 + k) / 8]))
                 };
-                let mut nb = 0u32;
-                let mut nd = 0u32;
                 let mut stops = [0u32; W];
                 let o = base + c0;
                 let tr: &mut [R; W] = (&mut out.t[o..o + W]).try_into().unwrap();
                 let cr: &mut [R; W] = (&mut out.color[o..o + W]).try_into().unwrap();
                 let lr: &mut [u32; W] = (&mut out.last[o..o + W]).try_into().unwrap();
                 let dr: &mut [u32; W] = (&mut done[o..o + W]).try_into().unwrap();
+                let nr: &mut [u32; W] = (&mut nblend[o..o + W]).try_into().unwrap();
                 let xh: &[R; W] = xs[c0..c0 + W].try_into().unwrap();
                 // Branch-free over the W columns (vectorises; masked-out columns keep their
                 // values); selects reproduce the sequential skip / stop / blend logic exactly.
@@ -128,18 +122,11 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
                     tr[k] = sel(blend, next, tt);
                     lr[k] = (tag & blend) | (lr[k] & !blend);
                     dr[k] |= stop;
-                    nb += blend & 1;
-                    if W == 8 {
-                        nd += stop & 1;
-                    } else {
-                        stops[k] = stop & 1;
-                    }
+                    nr[k] += blend & 1;
+                    stops[k] = stop & 1;
                 }
-                out.blends += nb as u64;
-                if W == 8 {
-                    n_done += nd;
-                    hd[h0] += nd;
-                } else {
+                // Pixels stop rarely (once each): count them only when one did.
+                if stops.iter().fold(0, |a, &s| a | s) != 0 {
                     for (h, s) in stops.chunks_exact(8).enumerate() {
                         let nd: u32 = s.iter().sum();
                         n_done += nd;
@@ -148,8 +135,8 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
                 }
             }
         }
-        e.halves = bits;
     }
+    out.blends = nblend.iter().map(|&n| n as u64).sum();
     // The backward visits the entries before the largest n_contrib only.
     entries.truncate(out.last.iter().copied().max().unwrap_or(0) as usize);
     out.work = entries;
