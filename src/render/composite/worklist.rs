@@ -163,22 +163,43 @@ pub(super) fn tile_entries<R: Real>(
     t: usize,
 ) -> Vec<Entry<R>> {
     let rect = bins.pixel_rect(t).map(|x| x as u32);
-    // The gather first, in a short loop of independent loads so that the cache misses of the
-    // random per-splat reads overlap; then the chord tests.
-    let mut chords = Vec::with_capacity(bins.list(t).len());
-    let mut entries: Vec<Entry<R>> = bins
-        .list(t)
-        .iter()
-        .filter_map(|&id| {
-            let (e, chord) = tile_entry(packed, rect, id)?;
+    // The gather first, in a loop of independent loads with the records `PREFETCH` entries
+    // ahead requested early, so that the cache misses of the random per-splat reads overlap;
+    // then the chord tests.
+    const PREFETCH: usize = 16;
+    let list = bins.list(t);
+    let mut chords = Vec::with_capacity(list.len());
+    let mut entries = Vec::with_capacity(list.len());
+    for (j, &id) in list.iter().enumerate() {
+        if let Some(&ahead) = list.get(j + PREFETCH) {
+            prefetch(&packed[ahead as usize]);
+        }
+        if let Some((e, chord)) = tile_entry(packed, rect, id) {
+            entries.push(e);
             chords.push(chord);
-            Some(e)
-        })
-        .collect();
+        }
+    }
     for (e, chord) in entries.iter_mut().zip(&chords) {
         e.halves = halves_word(chord, e.y0, e.y1, rect[0], rect[2]);
     }
     entries
+}
+
+/// Ask the CPU to bring the cache lines of `x` into the cache (a hint: no effect on results).
+#[inline(always)]
+fn prefetch<T>(x: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        let p = (x as *const T).cast::<i8>();
+        let n = std::mem::size_of::<T>();
+        for off in (0..n).step_by(64).chain(std::iter::once(n - 1)) {
+            // SAFETY: a prefetch never faults and `p + off` is inside `x`.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.add(off)) };
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = x;
 }
 
 /// The work-list entry of splat `id` in the tile with pixel rectangle `rect` (`halves` unset)
