@@ -12,9 +12,9 @@
 //!
 //! Saved for the backward pass (as 3DGS): the final T and the number of entries of the tile's
 //! work list up to and including the last blended one (`n_contrib`), per pixel; and, per tile,
-//! the work list up to the largest `n_contrib` with the per-row chord tests the forward made
-//! ([`WorkLists`]), so that the backward neither re-packs the splats nor redoes the chord tests
-//! (square root and divisions) of the rows it visits.
+//! the work list up to the largest `n_contrib` with the per-row chord tests made when the list
+//! was gathered ([`WorkLists`]), so that the backward neither re-packs the splats nor redoes the
+//! chord tests of the rows it visits.
 //!
 //! Backward, per pixel back to front from the last blended entry, T recovered by division
 //! T_k = T_{k+1} / (1 - alpha_k) (alpha <= 0.99, so no blow-up), S_k = sum_{j>k} c_j alpha_j T_j:
