@@ -8,7 +8,9 @@
 //!   reference measured on a smaller case in the same run, scaled per blend; the SIMD path used
 //!   ([`crate::simd::Simd::active`]) and the arithmetic limit of the work: blends x the kernels'
 //!   flops per blend over the peak f32 rate measured in the same run
-//!   ([`crate::simd::peak_run`]), and the fraction of it reached.
+//!   ([`crate::simd::peak_run`]), and the fraction of it reached; under each case, the CPU and
+//!   wall time of each phase ([`crate::audit::bench::RENDER_PHASES`]) and the lanes the tile
+//!   kernels evaluated against the blends.
 //!
 //! - `field`: the neural-field baselines ([`crate::field::bench`]): the peak f32 rate of
 //!   independent multiplies and adds on one and on all threads, the MLP forward + backward at
