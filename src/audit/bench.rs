@@ -3,7 +3,8 @@
 //!
 //! - [`ct_like_scene`] on [`bench_geometry`]: Gaussians filling a CT-like volume box;
 //! - [`time_render`]: forward and forward + backward of the rasterizer (projection, Eq. 3, and
-//!   compositing, Eqs. 4-5) in f32, median times and Gaussian-pixel blends;
+//!   compositing, Eqs. 4-5) in f32, median times and Gaussian-pixel blends, and the CPU and
+//!   wall time of each phase ([`RenderPhases`]) with the lanes the tile kernels evaluated;
 //! - [`time_naive`]: the same throughput of the naive per-pixel reference
 //!   ([`crate::render::composite::naive_forward`], every Gaussian tested at every pixel).
 
@@ -16,6 +17,7 @@ use crate::gaussians::model::N_FEATURES;
 use crate::gaussians::Gaussians;
 use crate::geometry::ConeBeam;
 use crate::image2d::Image2d;
+use crate::render::composite::{KernelWork, Phase};
 use crate::render::{self, composite, RenderSettings};
 
 /// Side of the CT-like volume box, mm.
@@ -100,6 +102,75 @@ pub struct RenderTiming {
     /// Process CPU time (all threads) per forward + backward, s (Linux; None elsewhere). On a
     /// shared machine this is less sensitive to other load than the wall time.
     pub cpu_forward_backward: Option<f64>,
+    /// Per-phase times and kernel work, measured in separate reps after the timed ones.
+    pub phases: RenderPhases,
+}
+
+/// Names of the rasterizer's phases in [`RenderPhases::cpu`] and [`RenderPhases::wall`], in
+/// the order they run: projection, tile binning and depth sort, per-splat packing, forward tile
+/// kernels, image assembly, backward tile kernels, gradient reduction over tiles, projection
+/// backward to the Gaussian parameters.
+pub const RENDER_PHASES: [&str; 8] = [
+    "project",
+    "bin + sort",
+    "pack",
+    "forward tiles",
+    "assemble",
+    "backward tiles",
+    "reduce",
+    "project bwd",
+];
+
+/// Mean time per forward + backward of each of [`RENDER_PHASES`], and the work of the tile
+/// kernels.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RenderPhases {
+    /// Process CPU time (all threads), s.
+    pub cpu: [f64; 8],
+    /// Wall time, s.
+    pub wall: [f64; 8],
+    /// Work of the forward and of the backward tile kernels in one pass.
+    pub forward_work: KernelWork,
+    pub backward_work: KernelWork,
+}
+
+/// Mean per-phase CPU and wall times of `reps` forward + backward passes ([`RenderPhases`]).
+fn time_phases(
+    g: &Gaussians<f32>,
+    cam: &crate::geometry::Camera,
+    st: &RenderSettings,
+    d: &Image2d<f32>,
+    reps: usize,
+) -> crate::Result<RenderPhases> {
+    use crate::field::train::cpu_seconds;
+    let now = || (cpu_seconds(libc::CLOCK_PROCESS_CPUTIME_ID), Instant::now());
+    let mut ph = RenderPhases::default();
+    for _ in 0..reps.max(1) {
+        // Times at the start and at the end of each phase, in order.
+        let mut marks = vec![now()];
+        let (splats, ps) = render::project::forward(g, cam, st)?;
+        marks.push(now());
+        let mut probe = |_: Phase| marks.push(now());
+        let bg = st.background as f32;
+        let (img, cs) = composite::forward_probed(&splats, cam.width, cam.height, bg, &mut probe);
+        let (ds, bw) = composite::backward_probed(&splats, &cs, d, &mut probe);
+        let params = render::project::backward(g, cam, st, &ps, &ds);
+        marks.push(now());
+        std::hint::black_box((&img, &params));
+        assert_eq!(marks.len(), RENDER_PHASES.len() + 1, "one mark per phase");
+        for (k, m) in marks.windows(2).enumerate() {
+            ph.cpu[k] += m[1].0 - m[0].0;
+            ph.wall[k] += (m[1].1 - m[0].1).as_secs_f64();
+        }
+        ph.forward_work = cs.forward_work;
+        ph.backward_work = bw;
+    }
+    let n = reps.max(1) as f64;
+    ph.cpu
+        .iter_mut()
+        .chain(ph.wall.iter_mut())
+        .for_each(|x| *x /= n);
+    Ok(ph)
 }
 
 /// CPU time (user + system, all threads) of this process so far, s (Linux `/proc/self/stat`).
@@ -141,6 +212,7 @@ pub fn time_render(n: usize, size: usize, reps: usize) -> crate::Result<RenderTi
         (Some(a), Some(b)) => Some((b - a) / reps.max(1) as f64),
         _ => None,
     };
+    let phases = time_phases(&g, &cam, &st, &d, reps)?;
     Ok(RenderTiming {
         gaussians: n,
         size,
@@ -148,6 +220,7 @@ pub fn time_render(n: usize, size: usize, reps: usize) -> crate::Result<RenderTi
         forward_backward: median(fb),
         blends,
         cpu_forward_backward: cpu,
+        phases,
     })
 }
 

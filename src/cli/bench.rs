@@ -8,7 +8,9 @@
 //!   reference measured on a smaller case in the same run, scaled per blend; the SIMD path used
 //!   ([`crate::simd::Simd::active`]) and the arithmetic limit of the work: blends x the kernels'
 //!   flops per blend over the peak f32 rate measured in the same run
-//!   ([`crate::simd::peak_run`]), and the fraction of it reached.
+//!   ([`crate::simd::peak_run`]), and the fraction of it reached; under each case, the CPU and
+//!   wall time of each phase ([`crate::audit::bench::RENDER_PHASES`]) and the lanes the tile
+//!   kernels evaluated against the blends.
 //!
 //! - `field`: the neural-field baselines ([`crate::field::bench`]): the peak f32 rate of
 //!   independent multiplies and adds on one and on all threads, the MLP forward + backward at
@@ -24,7 +26,9 @@ use anyhow::bail;
 
 use std::time::Instant;
 
-use crate::audit::bench::{process_cpu_seconds, time_naive, time_render, BOX_MM};
+use crate::audit::bench::{
+    process_cpu_seconds, time_naive, time_render, RenderTiming, BOX_MM, RENDER_PHASES,
+};
 use crate::render::composite;
 
 /// Arguments of `unispine bench`.
@@ -196,6 +200,7 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
             )
             .replace("NaN", "-");
             println!("{line}");
+            print_phases(&t);
         }
     }
     println!(
@@ -203,4 +208,30 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
          time (all threads) per forward + backward (mean over the reps)"
     );
     Ok(())
+}
+
+/// The per-phase times of one case and the lane use of the tile kernels.
+fn print_phases(t: &RenderTiming) {
+    let p = &t.phases;
+    let (cpu, wall): (f64, f64) = (p.cpu.iter().sum(), p.wall.iter().sum());
+    let cells: Vec<String> = RENDER_PHASES
+        .iter()
+        .zip(p.cpu.iter().zip(&p.wall))
+        .map(|(n, (c, w))| format!("{n} {:.1}/{:.1}", c * 1e3, w * 1e3))
+        .collect();
+    println!(
+        "  phases, cpu/wall ms per forward + backward (total {:.1}/{:.1}): {}",
+        cpu * 1e3,
+        wall * 1e3,
+        cells.join(", ")
+    );
+    for (name, w) in [("forward", p.forward_work), ("backward", p.backward_work)] {
+        println!(
+            "  {name} tiles: {} entries, {} entry rows, {} lanes evaluated, {:.1}% of them blends",
+            w.entries,
+            w.rows,
+            w.lanes,
+            100.0 * t.blends as f64 / w.lanes as f64
+        );
+    }
 }

@@ -12,9 +12,9 @@
 //!
 //! Saved for the backward pass (as 3DGS): the final T and the number of entries of the tile's
 //! work list up to and including the last blended one (`n_contrib`), per pixel; and, per tile,
-//! the work list up to the largest `n_contrib` with the per-row chord tests the forward made
-//! ([`WorkLists`]), so that the backward neither re-packs the splats nor redoes the chord tests
-//! (square root and divisions) of the rows it visits.
+//! the work list up to the largest `n_contrib` with the per-row chord tests made when the list
+//! was gathered ([`WorkLists`]), so that the backward neither re-packs the splats nor redoes the
+//! chord tests of the rows it visits.
 //!
 //! Backward, per pixel back to front from the last blended entry, T recovered by division
 //! T_k = T_{k+1} / (1 - alpha_k) (alpha <= 0.99, so no blow-up), S_k = sum_{j>k} c_j alpha_j T_j:
@@ -60,8 +60,8 @@ mod forward;
 mod naive;
 mod worklist;
 
-pub use backward::{backward, backward_with};
-pub use forward::{forward, forward_with};
+pub use backward::{backward, backward_probed, backward_with};
+pub use forward::{forward, forward_probed, forward_with};
 pub use naive::naive_forward;
 pub use worklist::{box_pixels, WorkLists};
 
@@ -84,6 +84,45 @@ pub const FLOPS_PER_BLEND_FORWARD: u64 = 42;
 /// recovery 3, dL/dalpha 8, the two running sums 6, d(power) and the six gradient lanes 20.
 pub const FLOPS_PER_BLEND_BACKWARD: u64 = 74;
 
+/// The compositor's phases in the order they run, reported to the probe of [`forward_probed`]
+/// (`Bin` to `Assemble`) and [`backward_probed`] (`BackwardTiles`, `Reduce`) as each ends (the
+/// per-phase times of `unispine bench render`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Phase {
+    /// Tile binning and the (tile, depth, index) sort ([`super::tiles::bin`]).
+    Bin,
+    /// Per-splat packed records with their pixel boxes.
+    Pack,
+    /// The forward tile kernels (parallel over tiles), including the gather of each tile's
+    /// work list.
+    ForwardTiles,
+    /// Tiles to image, final transmittance and `n_contrib`.
+    Assemble,
+    /// The backward tile kernels (parallel over tiles).
+    BackwardTiles,
+    /// Per-tile gradient records to per-splat gradients.
+    Reduce,
+}
+
+/// Work counters of one pass of the tile kernels (the useful lanes are the blends).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct KernelWork {
+    /// Work-list entries visited.
+    pub entries: u64,
+    /// (entry, tile row) pairs visited.
+    pub rows: u64,
+    /// Pixel lanes evaluated (lane vectors x their width), including masked-out lanes.
+    pub lanes: u64,
+}
+
+impl std::ops::AddAssign for KernelWork {
+    fn add_assign(&mut self, o: KernelWork) {
+        self.entries += o.entries;
+        self.rows += o.rows;
+        self.lanes += o.lanes;
+    }
+}
+
 /// What [`backward`](fn@backward) needs from [`forward`](fn@forward).
 #[derive(Clone, Debug, Default)]
 pub struct CompositeSaved<R: Real> {
@@ -97,6 +136,8 @@ pub struct CompositeSaved<R: Real> {
     pub n_contrib: Vec<u32>,
     /// Number of (pixel, splat) blends performed (throughput statistics).
     pub blends: u64,
+    /// Work of the forward tile kernels (statistics).
+    pub forward_work: KernelWork,
     /// The tile work lists built by [`forward`](fn@forward), reused by [`backward`](fn@backward)
     /// (which rebuilds them when this is empty, e.g. for a `Default` value).
     pub work: WorkLists<R>,

@@ -10,13 +10,16 @@ use super::super::tiles::TILE;
 use super::super::SplatGrads;
 use super::dispatch::{self, Kernel};
 use super::worklist::{pack, tile_entries, Entry, Packed};
-use super::{CompositeSaved, Splats, ALPHA_MAX, ALPHA_MIN, TP};
+use super::{CompositeSaved, KernelWork, Phase, Splats, ALPHA_MAX, ALPHA_MIN, TP};
 use crate::image2d::Image2d;
 use crate::real::Real;
 use crate::simd::Simd;
 
 /// Gradient record of one work-list entry: (mean x, mean y, A, B, C, opacity, colour).
 pub(super) type Rec<R> = (u32, [R; 7]);
+
+/// Output of the backward kernel of one tile: its gradient records and its work.
+pub(super) type TileGrads<R> = (Vec<Rec<R>>, KernelWork);
 
 /// The backward kernel of tile `t`, `W` pixels per lane vector (see
 /// [`forward_tile`](super::forward::forward_tile); both widths give the same bits: per column, the
@@ -27,7 +30,7 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
     saved: &CompositeSaved<R>,
     d_image: &Image2d<R>,
     t: usize,
-) -> Vec<Rec<R>> {
+) -> TileGrads<R> {
     const { assert!(W == 8 || W == 16) };
     let bins = &saved.bins;
     let width = bins.width;
@@ -53,13 +56,13 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
         max_last = max_last.max(row_last[row - y0]);
     }
     if max_last == 0 {
-        return Vec::new();
+        return (Vec::new(), KernelWork::default());
     }
     let built;
     let entries: &[Entry<R>] = if saved.work.tiles.len() == bins.n_tiles() {
         &saved.work.tiles[t]
     } else {
-        built = tile_entries(packed, bins, t, true);
+        built = tile_entries(packed, bins, t);
         &built
     };
     let (amax, amin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN));
@@ -69,6 +72,7 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
     let bg = saved.background;
     let xs: [R; TILE] = std::array::from_fn(|k| R::c((x0 + k) as f64) + half);
     let mut recs = Vec::with_capacity(max_last as usize);
+    let mut stats = KernelWork::default();
     // Per-column partial sums (each column sums its own rows in order), reduced over the
     // columns in order at the end of the entry.
     let mut lanes = [[zero; TILE]; 7];
@@ -78,6 +82,7 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
         let (k0, k1) = (e.x0 as usize - x0, e.x1 as usize - x0);
         let colm: [u32; TILE] = std::array::from_fn(|k| mask(k0 <= k && k < k1));
         let mut any = 0u32;
+        stats.entries += 1;
         for l in lanes.iter_mut() {
             *l = [zero; TILE];
         }
@@ -85,6 +90,7 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
             if ju >= row_last[row - y0] {
                 continue;
             }
+            stats.rows += 1;
             let dy = R::c(row as f64) + half - e.my;
             let base = (row - y0) * TILE;
             let r2 = 2 * (row - y0);
@@ -94,6 +100,7 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
                 if !hv[h0..h0 + W / 8].iter().any(|&h| h) {
                     continue;
                 }
+                stats.lanes += W as u64;
                 let act: [u32; W] = if W == 8 {
                     colm[c0..c0 + W].try_into().unwrap()
                 } else {
@@ -151,7 +158,7 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
             recs.push((e.id, acc));
         }
     }
-    recs
+    (recs, stats)
 }
 
 /// Vector-Jacobian product of [`forward`](fn@super::forward): the gradient of sum(d_image * image)
@@ -176,12 +183,35 @@ pub fn backward_with<R: Real>(
     backward_kernel(Kernel::of(simd), splats, saved, d_image)
 }
 
+/// [`backward`] calling `probe` as each of its phases ends ([`Phase::BackwardTiles`],
+/// [`Phase::Reduce`]), e.g. to time them; also returns the work of the tile kernels. Same
+/// gradients as [`backward`].
+pub fn backward_probed<R: Real>(
+    splats: &Splats<R>,
+    saved: &CompositeSaved<R>,
+    d_image: &Image2d<R>,
+    probe: &mut dyn FnMut(Phase),
+) -> (SplatGrads<R>, KernelWork) {
+    let k = Kernel::of(Simd::active());
+    backward_kernel_probed(k, splats, saved, d_image, probe)
+}
+
 pub(crate) fn backward_kernel<R: Real>(
     kernel: Kernel,
     splats: &Splats<R>,
     saved: &CompositeSaved<R>,
     d_image: &Image2d<R>,
 ) -> SplatGrads<R> {
+    backward_kernel_probed(kernel, splats, saved, d_image, &mut |_| {}).0
+}
+
+fn backward_kernel_probed<R: Real>(
+    kernel: Kernel,
+    splats: &Splats<R>,
+    saved: &CompositeSaved<R>,
+    d_image: &Image2d<R>,
+    probe: &mut dyn FnMut(Phase),
+) -> (SplatGrads<R>, KernelWork) {
     let n = splats.mean2d.len();
     assert_eq!(
         (d_image.width, d_image.height),
@@ -194,10 +224,12 @@ pub(crate) fn backward_kernel<R: Real>(
     } else {
         pack(splats, &saved.bins)
     };
-    let recs: Vec<Vec<Rec<R>>> = (0..saved.bins.n_tiles())
+    let recs: Vec<TileGrads<R>> = (0..saved.bins.n_tiles())
         .into_par_iter()
         .map(|t| dispatch::backward_tile(kernel, &packed, saved, d_image, t))
         .collect();
+    probe(Phase::BackwardTiles);
+    let mut work = KernelWork::default();
     let mut out = SplatGrads {
         mean2d: vec![[R::zero(); 2]; n],
         conic: vec![[R::zero(); 3]; n],
@@ -205,7 +237,8 @@ pub(crate) fn backward_kernel<R: Real>(
         color: vec![R::zero(); n],
     };
     // Sequential reduction in tile order (and, within a tile, back-to-front entry order).
-    for tile in &recs {
+    for (tile, w) in &recs {
+        work += *w;
         for (id, a) in tile {
             let i = *id as usize;
             out.mean2d[i][0] += a[0];
@@ -217,5 +250,6 @@ pub(crate) fn backward_kernel<R: Real>(
             out.color[i] += a[6];
         }
     }
-    out
+    probe(Phase::Reduce);
+    (out, work)
 }

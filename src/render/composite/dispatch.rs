@@ -3,7 +3,7 @@
 //! enables floating-point contraction (Rust never fuses a multiply and an add by itself), so
 //! all perform the same IEEE operations per pixel and give the same bits.
 
-use super::backward::Rec;
+use super::backward::TileGrads;
 use super::forward::TileOut;
 use super::worklist::Packed;
 use super::{CompositeSaved, TileBins};
@@ -81,7 +81,7 @@ pub(super) fn backward_tile<R: Real>(
     saved: &CompositeSaved<R>,
     d_image: &Image2d<R>,
     t: usize,
-) -> Vec<Rec<R>> {
+) -> TileGrads<R> {
     #[cfg(target_arch = "x86_64")]
     match k.simd {
         // SAFETY: the CPU supports the instruction set (checked by `supported`).
@@ -107,7 +107,7 @@ unsafe fn backward_tile_avx2<R: Real, const W: usize>(
     saved: &CompositeSaved<R>,
     d_image: &Image2d<R>,
     t: usize,
-) -> Vec<Rec<R>> {
+) -> TileGrads<R> {
     super::backward::backward_tile::<R, W>(s, saved, d_image, t)
 }
 
@@ -118,6 +118,6 @@ unsafe fn backward_tile_avx512<R: Real>(
     saved: &CompositeSaved<R>,
     d_image: &Image2d<R>,
     t: usize,
-) -> Vec<Rec<R>> {
+) -> TileGrads<R> {
     super::backward::backward_tile::<R, 16>(s, saved, d_image, t)
 }

@@ -8,8 +8,8 @@ use rayon::prelude::*;
 use super::super::lanes::{exp_k, mask, power_of, sel};
 use super::super::tiles::{self, TileBins, TILE};
 use super::dispatch::{self, Kernel};
-use super::worklist::{half_bits, halves, pack, tile_entries, Entry, Packed, WorkLists};
-use super::{CompositeSaved, Splats, ALPHA_MAX, ALPHA_MIN, TP, T_MIN};
+use super::worklist::{pack, tile_entries, Entry, Packed, WorkLists};
+use super::{CompositeSaved, KernelWork, Phase, Splats, ALPHA_MAX, ALPHA_MIN, TP, T_MIN};
 use crate::image2d::Image2d;
 use crate::real::Real;
 use crate::simd::Simd;
@@ -21,7 +21,61 @@ pub(super) struct TileOut<R> {
     t: [R; TP],
     last: [u32; TP],
     blends: u64,
+    stats: KernelWork,
     work: Vec<Entry<R>>,
+}
+
+/// Per-tile state of the forward kernel, tile-local.
+struct State<'a, R> {
+    t: &'a mut [R; TP],
+    color: &'a mut [R; TP],
+    last: &'a mut [u32; TP],
+    done: &'a mut [u32; TP],
+    nblend: &'a mut [u32; TP],
+}
+
+/// Eqs. (4)-(5) for entry `e` (list position `tag` - 1) at the `L` pixels from tile-local
+/// offset `o`, with pixel-centre offsets `xh` (columns) and `dy` (rows) per lane and the lanes
+/// `act`; returns the lanes that stopped (1) or not (0). Branch-free over the lanes
+/// (vectorises; masked-out lanes keep their values); selects reproduce the sequential skip /
+/// stop / blend logic exactly, and every lane does the same IEEE operations whatever `L`.
+#[inline(always)]
+fn blend_lanes<R: Real, const L: usize>(
+    e: &Entry<R>,
+    tag: u32,
+    xh: &[R; L],
+    dy: &[R; L],
+    act: &[u32; L],
+    st: &mut State<'_, R>,
+    o: usize,
+) -> [u32; L] {
+    let (amax, amin, tmin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN), R::c(T_MIN));
+    let one = R::one();
+    let tr: &mut [R; L] = (&mut st.t[o..o + L]).try_into().unwrap();
+    let cr: &mut [R; L] = (&mut st.color[o..o + L]).try_into().unwrap();
+    let lr: &mut [u32; L] = (&mut st.last[o..o + L]).try_into().unwrap();
+    let dr: &mut [u32; L] = (&mut st.done[o..o + L]).try_into().unwrap();
+    let nr: &mut [u32; L] = (&mut st.nblend[o..o + L]).try_into().unwrap();
+    let mut stops = [0u32; L];
+    for k in 0..L {
+        let dx = xh[k] - e.mx;
+        let pw = power_of(e.a, e.b, e.c, dx, dy[k]);
+        let og = e.o * exp_k(pw);
+        let alpha = sel(mask(og > amax), amax, og);
+        let tt = tr[k];
+        let next = tt * (one - alpha);
+        let valid = act[k] & !dr[k] & mask(pw <= R::zero()) & mask(alpha >= amin);
+        let stop = valid & mask(next < tmin);
+        let blend = valid & !stop;
+        let c_new = cr[k] + e.col * alpha * tt;
+        cr[k] = sel(blend, c_new, cr[k]);
+        tr[k] = sel(blend, next, tt);
+        lr[k] = (tag & blend) | (lr[k] & !blend);
+        dr[k] |= stop;
+        nr[k] += blend & 1;
+        stops[k] = stop & 1;
+    }
+    stops
 }
 
 /// The forward kernel of tile `t`, `W` pixels per lane vector (8: one 8-column half of a tile
@@ -43,109 +97,103 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
         t: [R::one(); TP],
         last: [0u32; TP],
         blends: 0,
+        stats: KernelWork::default(),
         work: Vec::new(),
     };
     let mut done = [0u32; TP];
+    // Blends per pixel (summed at the end of the tile: no horizontal sum per lane vector).
+    let mut nblend = [0u32; TP];
+    let mut st = State {
+        t: &mut out.t,
+        color: &mut out.color,
+        last: &mut out.last,
+        done: &mut done,
+        nblend: &mut nblend,
+    };
+    let mut stats = KernelWork::default();
     let mut n_done = 0u32;
     // Pixels done per 8-column half of each tile row; a half (or row) whose pixels are all
     // done is skipped: every lane would fail the `!done` test, so skipping it changes no bit.
     let mut half_done = [[0u32; 2]; TILE];
     // Image pixels per half (fewer at the right edge of the image, 0 beyond it).
     let half_len: [u32; 2] = std::array::from_fn(|h| (x1 - x0).saturating_sub(8 * h).min(8) as u32);
-    let (amax, amin, tmin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN), R::c(T_MIN));
-    let one = R::one();
     let half = R::c(0.5);
     // Pixel-centre x coordinates of the tile's columns.
     let xs: [R; TILE] = std::array::from_fn(|k| R::c((x0 + k) as f64) + half);
-    // The whole work list is gathered first (independent loads, so the cache misses of the
-    // random per-splat reads overlap); its prefix up to the largest n_contrib is kept for the
-    // backward.
-    let mut entries = tile_entries(packed, bins, t, false);
-    for (j, e) in entries.iter_mut().enumerate() {
+    // The whole work list is gathered first; its prefix up to the largest n_contrib is kept for
+    // the backward.
+    let entries = tile_entries(packed, bins, t);
+    for (j, e) in entries.iter().enumerate() {
         if n_done == npix {
             break;
         }
-        // The chord test of each visited row, recorded in `halves` for the backward. A row the
-        // forward skips here (all its pixels done before entry j) has n_contrib <= j at every
-        // pixel, so the backward skips it too and its bits are never read.
-        let Some(Packed { chord, .. }) = packed[e.id as usize].as_ref() else {
-            unreachable!("work-list entries come from packed splats")
-        };
-        let mut bits = 0u32;
         let tag = j as u32 + 1;
+        stats.entries += 1;
         let (k0, k1) = (e.x0 as usize - x0, e.x1 as usize - x0);
         let colm: [u32; TILE] = std::array::from_fn(|k| mask(k0 <= k && k < k1));
-        for row in e.y0 as usize..e.y1 as usize {
-            let hd = &mut half_done[row - y0];
-            if *hd == half_len {
-                continue;
-            }
-            let dy = R::c(row as f64) + half - e.my;
-            let base = (row - y0) * TILE;
-            let hv = halves(chord, row, x0);
-            bits |= half_bits(hv, row - y0);
-            let go = [hv[0] && hd[0] != half_len[0], hv[1] && hd[1] != half_len[1]];
-            for v in 0..TILE / W {
-                let (c0, h0) = (v * W, v * W / 8);
-                if !go[h0..h0 + W / 8].iter().any(|&g| g) {
+        // The halves row `r` (tile-local) visits: those meeting the chord and not all done.
+        let go = |r: usize, hd: &[[u32; 2]; TILE]| -> [bool; 2] {
+            let h = e.halves >> (2 * r);
+            [
+                h & 1 != 0 && hd[r][0] != half_len[0],
+                h & 2 != 0 && hd[r][1] != half_len[1],
+            ]
+        };
+        let (r0, r1) = (e.y0 as usize - y0, e.y1 as usize - y0);
+        if W == 8 {
+            for r in r0..r1 {
+                let g = go(r, &half_done);
+                if !(g[0] || g[1]) {
                     continue;
                 }
-                // Lanes in the entry's box and in a half that meets the chord (with 8 lanes
-                // the half is visited only when it meets it).
-                let act: [u32; W] = if W == 8 {
-                    colm[c0..c0 + W].try_into().unwrap()
-                } else {
-                    std::array::from_fn(|k| colm[c0 + k] & mask(hv[(c0 + k) / 8]))
-                };
-                let mut nb = 0u32;
-                let mut nd = 0u32;
-                let mut stops = [0u32; W];
-                let o = base + c0;
-                let tr: &mut [R; W] = (&mut out.t[o..o + W]).try_into().unwrap();
-                let cr: &mut [R; W] = (&mut out.color[o..o + W]).try_into().unwrap();
-                let lr: &mut [u32; W] = (&mut out.last[o..o + W]).try_into().unwrap();
-                let dr: &mut [u32; W] = (&mut done[o..o + W]).try_into().unwrap();
-                let xh: &[R; W] = xs[c0..c0 + W].try_into().unwrap();
-                // Branch-free over the W columns (vectorises; masked-out columns keep their
-                // values); selects reproduce the sequential skip / stop / blend logic exactly.
-                for k in 0..W {
-                    let dx = xh[k] - e.mx;
-                    let pw = power_of(e.a, e.b, e.c, dx, dy);
-                    let og = e.o * exp_k(pw);
-                    let alpha = sel(mask(og > amax), amax, og);
-                    let tt = tr[k];
-                    let next = tt * (one - alpha);
-                    let valid = act[k] & !dr[k] & mask(pw <= R::zero()) & mask(alpha >= amin);
-                    let stop = valid & mask(next < tmin);
-                    let blend = valid & !stop;
-                    let c_new = cr[k] + e.col * alpha * tt;
-                    cr[k] = sel(blend, c_new, cr[k]);
-                    tr[k] = sel(blend, next, tt);
-                    lr[k] = (tag & blend) | (lr[k] & !blend);
-                    dr[k] |= stop;
-                    nb += blend & 1;
-                    if W == 8 {
-                        nd += stop & 1;
-                    } else {
-                        stops[k] = stop & 1;
+                stats.rows += 1;
+                let dy = [R::c((y0 + r) as f64) + half - e.my; 8];
+                for (h, &gh) in g.iter().enumerate() {
+                    if !gh {
+                        continue;
+                    }
+                    stats.lanes += 8;
+                    let c0 = 8 * h;
+                    let act: &[u32; 8] = colm[c0..c0 + 8].try_into().unwrap();
+                    let xh: &[R; 8] = xs[c0..c0 + 8].try_into().unwrap();
+                    let stops = blend_lanes(e, tag, xh, &dy, act, &mut st, r * TILE + c0);
+                    if stops.iter().fold(0, |a, &s| a | s) != 0 {
+                        let nd: u32 = stops.iter().sum();
+                        n_done += nd;
+                        half_done[r][h] += nd;
                     }
                 }
-                out.blends += nb as u64;
-                if W == 8 {
-                    n_done += nd;
-                    hd[h0] += nd;
-                } else {
+            }
+        } else {
+            for r in r0..r1 {
+                let g = go(r, &half_done);
+                if !(g[0] || g[1]) {
+                    continue;
+                }
+                stats.rows += 1;
+                stats.lanes += TILE as u64;
+                let hv = [
+                    e.halves >> (2 * r) & 1 != 0,
+                    e.halves >> (2 * r + 1) & 1 != 0,
+                ];
+                let act: [u32; TILE] = std::array::from_fn(|k| colm[k] & mask(hv[k / 8]));
+                let dy = [R::c((y0 + r) as f64) + half - e.my; TILE];
+                let stops = blend_lanes(e, tag, &xs, &dy, &act, &mut st, r * TILE);
+                // Pixels stop rarely (once each): count them only when one did.
+                if stops.iter().fold(0, |a, &s| a | s) != 0 {
                     for (h, s) in stops.chunks_exact(8).enumerate() {
                         let nd: u32 = s.iter().sum();
                         n_done += nd;
-                        hd[h0 + h] += nd;
+                        half_done[r][h] += nd;
                     }
                 }
             }
         }
-        e.halves = bits;
     }
+    out.stats = stats;
+    out.blends = nblend.iter().map(|&n| n as u64).sum();
     // The backward visits the entries before the largest n_contrib only.
+    let mut entries = entries;
     entries.truncate(out.last.iter().copied().max().unwrap_or(0) as usize);
     out.work = entries;
     out
@@ -176,6 +224,19 @@ pub fn forward_with<R: Real>(
     forward_kernel(Kernel::of(simd), splats, width, height, background)
 }
 
+/// [`forward`] calling `probe` as each of its phases ends ([`Phase::Bin`] to
+/// [`Phase::Assemble`]), e.g. to time them. Same result as [`forward`].
+pub fn forward_probed<R: Real>(
+    splats: &Splats<R>,
+    width: usize,
+    height: usize,
+    background: R,
+    probe: &mut dyn FnMut(Phase),
+) -> (Image2d<R>, CompositeSaved<R>) {
+    let k = Kernel::of(Simd::active());
+    forward_kernel_probed(k, splats, width, height, background, probe)
+}
+
 pub(crate) fn forward_kernel<R: Real>(
     kernel: Kernel,
     splats: &Splats<R>,
@@ -183,12 +244,26 @@ pub(crate) fn forward_kernel<R: Real>(
     height: usize,
     background: R,
 ) -> (Image2d<R>, CompositeSaved<R>) {
+    forward_kernel_probed(kernel, splats, width, height, background, &mut |_| {})
+}
+
+fn forward_kernel_probed<R: Real>(
+    kernel: Kernel,
+    splats: &Splats<R>,
+    width: usize,
+    height: usize,
+    background: R,
+    probe: &mut dyn FnMut(Phase),
+) -> (Image2d<R>, CompositeSaved<R>) {
     let bins = tiles::bin(splats, width, height);
+    probe(Phase::Bin);
     let packed = pack(splats, &bins);
+    probe(Phase::Pack);
     let mut outs: Vec<TileOut<R>> = (0..bins.n_tiles())
         .into_par_iter()
         .map(|t| dispatch::forward_tile(kernel, &packed, &bins, t))
         .collect();
+    probe(Phase::ForwardTiles);
     let work = WorkLists {
         tiles: outs
             .iter_mut()
@@ -199,8 +274,10 @@ pub(crate) fn forward_kernel<R: Real>(
     let mut final_t = vec![R::one(); width * height];
     let mut n_contrib = vec![0u32; width * height];
     let mut blends = 0;
+    let mut forward_work = KernelWork::default();
     for (t, o) in outs.iter().enumerate() {
         blends += o.blends;
+        forward_work += o.stats;
         let [x0, x1, y0, y1] = bins.pixel_rect(t);
         for row in y0..y1 {
             for col in x0..x1 {
@@ -212,15 +289,15 @@ pub(crate) fn forward_kernel<R: Real>(
             }
         }
     }
-    (
-        img,
-        CompositeSaved {
-            bins,
-            background,
-            final_t,
-            n_contrib,
-            blends,
-            work,
-        },
-    )
+    let saved = CompositeSaved {
+        bins,
+        background,
+        final_t,
+        n_contrib,
+        blends,
+        forward_work,
+        work,
+    };
+    probe(Phase::Assemble);
+    (img, saved)
 }

@@ -346,3 +346,33 @@ fn every_simd_path_gives_the_same_bits() {
         }
     }
 }
+
+#[test]
+fn probed_passes_report_their_phases_in_order_and_change_no_bit() {
+    let (w, h) = (53, 37);
+    let s = to_f32(&random_splats(900, w, h, 31));
+    let d = Image2d::filled(w, h, 0.3f32);
+    let mut seen = Vec::new();
+    let (img, saved) = forward_probed(&s, w, h, 0.2f32, &mut |p| seen.push(p));
+    let (g, work) = backward_probed(&s, &saved, &d, &mut |p| seen.push(p));
+    use Phase::*;
+    assert_eq!(
+        seen,
+        [Bin, Pack, ForwardTiles, Assemble, BackwardTiles, Reduce]
+    );
+    let (img2, saved2) = forward(&s, w, h, 0.2f32);
+    let g2 = backward(&s, &saved2, &d);
+    assert!(bits(&img, &g, &saved) == bits(&img2, &g2, &saved2));
+    // The work counters: every blend is an evaluated lane of the forward, lanes come in whole
+    // vectors of 8 or 16, each row the forward visits holds at least one vector, and the
+    // backward visits exactly the entries the forward kept.
+    let fw = saved.forward_work;
+    println!("forward {fw:?}, backward {work:?}, blends {}", saved.blends);
+    assert!(saved.blends > 0 && fw.lanes >= saved.blends);
+    assert!(fw.lanes % 8 == 0 && work.lanes % 8 == 0);
+    assert!(fw.lanes >= 8 * fw.rows && fw.rows > 0);
+    assert!(work.lanes > 0 && work.rows > 0);
+    let kept: usize = saved.work.tiles.iter().map(|t| t.len()).sum();
+    assert_eq!(work.entries, kept as u64);
+    assert!(work.entries <= fw.entries);
+}

@@ -6,7 +6,7 @@
 
 use rayon::prelude::*;
 
-use super::super::tiles::{self, TileBins};
+use super::super::tiles::{self, TileBins, TILE};
 use super::Splats;
 use crate::real::Real;
 
@@ -39,46 +39,53 @@ pub(super) struct Entry<R> {
     pub(super) y0: u32,
     pub(super) y1: u32,
     /// Bit `2 r + h`: the 8-column half `h` of tile row `r` (tile-local) may hold a pixel with
-    /// alpha >= 1/255 ([`halves`]). Set by [`forward_tile`](super::forward::forward_tile) for the
-    /// rows it visits and read by [`backward_tile`](super::backward::backward_tile), so the chord
-    /// test (a square root and two divisions) runs once per (tile, splat, row).
+    /// alpha >= 1/255 ([`halves_word`]). Set by [`tile_entries`] and read by both kernels, so
+    /// the chord test (a square root) runs once per (tile, splat, row), outside the pixel loops.
     pub(super) halves: u32,
 }
 
 /// Per-splat record of [`pack`]: the entry (box clipped to the image, `halves` unset) and the
-/// f64 copies for the per-row chord of the ellipse A dx^2 + 2 B dx dy + C dy^2 <= 2 l:
-/// (mx, my, A, B, 2 l A, det) (det = 0: no chord test).
+/// f64 data of the per-row chord of the ellipse A dx^2 + 2 B dx dy + C dy^2 <= 2 l:
+/// (mx, my, 1 / A, B / A, 2 l A, det) (det = 0: no chord test).
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Packed<R> {
     pub(super) e: Entry<R>,
     pub(super) chord: [f64; 6],
 }
 
-/// Which 8-column halves of tile row `row` (tile origin column `x0`) can hold a pixel with
-/// alpha >= 1/255 for the splat with chord data `chord` ([`Packed`]): those meeting the
-/// ellipse's chord on that row widened by one pixel (the same margin as the box). Outside it
-/// alpha < 1/255, so skipping a half changes no bit.
+/// The [`Entry::halves`] word of a splat with chord data `chord` ([`Packed`]) in the tile whose
+/// top-left pixel is (`rx0`, `ry0`), for the tile rows of the image rows `y0..y1`: the bits of
+/// the 8-column halves that meet the ellipse's chord on that row widened by one pixel (the same
+/// margin as the box). Outside it alpha < 1/255, so skipping a half changes no bit (the margin
+/// also covers the rounding of the chord, a few ulp). Branch-free over the 16 rows, so that it
+/// vectorises.
 #[inline(always)]
-pub(super) fn halves(chord: &[f64; 6], row: usize, x0: usize) -> [bool; 2] {
-    let [mx, my, a, b, two_la, det] = *chord;
-    if det <= 0.0 {
-        return [true, true];
+pub(super) fn halves_word(chord: &[f64; 6], y0: u32, y1: u32, rx0: u32, ry0: u32) -> u32 {
+    let [mx, my, inv_a, b_a, two_la, det] = *chord;
+    let w = [rx0 as f64, rx0 as f64 + 8.0, rx0 as f64 + 16.0];
+    let mut bits = 0u32;
+    for r in 0..TILE as u32 {
+        let row = ry0 + r;
+        let dy = row as f64 + 0.5 - my;
+        // Negative when the row misses the (log-margin widened) ellipse: the square root is
+        // then NaN and both tests below fail (alpha < 1/255 on all of the row).
+        let disc = two_la - det * dy * dy;
+        let half_w = disc.sqrt() * inv_a;
+        let c = mx - b_a * dy;
+        // Pixel centres col + 0.5 within [c - half_w - 1, c + half_w + 1].
+        let (lo, hi) = (c - half_w - 1.5, c + half_w + 0.5);
+        let in_box = (y0 <= row) & (row < y1);
+        let h0 = (hi >= w[0]) & (lo <= w[1] - 1.0) & in_box;
+        let h1 = (hi >= w[1]) & (lo <= w[2] - 1.0) & in_box;
+        bits |= (h0 as u32 | (h1 as u32) << 1) << (2 * r);
     }
-    let dy = row as f64 + 0.5 - my;
-    let disc = two_la - det * dy * dy;
-    if disc < 0.0 {
-        // The row misses the (log-margin widened) ellipse: alpha < 1/255 on all of it.
-        return [false, false];
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    if !(det > 0.0) {
+        // No chord test: every half of the box's rows.
+        bits =
+            (y0.max(ry0)..y1.min(ry0 + TILE as u32)).fold(0, |b, row| b | 3 << (2 * (row - ry0)));
     }
-    let r = disc.sqrt() / a;
-    let c = mx - b * dy / a;
-    // Pixel centres col + 0.5 within [c - r - 1, c + r + 1].
-    let (lo, hi) = (c - r - 1.5, c + r + 0.5);
-    let w = [x0 as f64, x0 as f64 + 8.0, x0 as f64 + 16.0];
-    [
-        hi >= w[0] && lo <= w[1] - 1.0,
-        hi >= w[1] && lo <= w[2] - 1.0,
-    ]
+    bits
 }
 
 /// Per-splat entry with its pixel box clipped to the image, or `None` when the splat cannot
@@ -135,9 +142,9 @@ pub(super) fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Packed
                 halves: 0,
             };
             let chord = if ok {
-                [mx, my, a, b, 2.0 * l * a, det]
+                [mx, my, 1.0 / a, b / a, 2.0 * l * a, det]
             } else {
-                [mx, my, a, b, 0.0, 0.0]
+                [mx, my, 0.0, 0.0, 0.0, 0.0]
             };
             Some(Packed { e, chord })
         })
@@ -145,62 +152,78 @@ pub(super) fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Packed
 }
 
 /// The work list of tile `t`: its splats in depth order, each with the box of pixels where it can
-/// reach alpha >= 1/255 clipped to the tile. Entries that reach no pixel of the tile are dropped.
-/// [`backward`](fn@super::backward) reuses the prefix that
+/// reach alpha >= 1/255 clipped to the tile and its [`Entry::halves`] word. Entries that reach
+/// no pixel of the tile are dropped. [`backward`](fn@super::backward) reuses the prefix that
 /// [`forward_tile`](super::forward::forward_tile) kept, or rebuilds the list with this function.
-///
-/// `with_halves`: fill [`Entry::halves`] for every row of each box (what
-/// [`backward`](fn@super::backward) needs when it rebuilds the list); otherwise it is left 0 and
-/// [`forward_tile`](super::forward::forward_tile) fills it for the rows it visits.
+/// Inlined into the kernels, so that the chord tests are compiled for their instruction set.
+#[inline(always)]
 pub(super) fn tile_entries<R: Real>(
     packed: &[Option<Packed<R>>],
     bins: &TileBins,
     t: usize,
-    with_halves: bool,
 ) -> Vec<Entry<R>> {
     let rect = bins.pixel_rect(t).map(|x| x as u32);
-    bins.list(t)
-        .iter()
-        .filter_map(|&id| tile_entry(packed, rect, id, with_halves))
-        .collect()
+    // The gather first, in a loop of independent loads with the records `PREFETCH` entries
+    // ahead requested early, so that the cache misses of the random per-splat reads overlap;
+    // then the chord tests.
+    const PREFETCH: usize = 16;
+    let list = bins.list(t);
+    let mut chords = Vec::with_capacity(list.len());
+    let mut entries = Vec::with_capacity(list.len());
+    for (j, &id) in list.iter().enumerate() {
+        if let Some(&ahead) = list.get(j + PREFETCH) {
+            prefetch(&packed[ahead as usize]);
+        }
+        if let Some((e, chord)) = tile_entry(packed, rect, id) {
+            entries.push(e);
+            chords.push(chord);
+        }
+    }
+    for (e, chord) in entries.iter_mut().zip(&chords) {
+        e.halves = halves_word(chord, e.y0, e.y1, rect[0], rect[2]);
+    }
+    entries
 }
 
-/// The work-list entry of splat `id` in the tile with pixel rectangle `rect`, or `None` when
-/// its box misses the tile.
+/// Ask the CPU to bring the cache lines of `x` into the cache (a hint: no effect on results).
+#[inline(always)]
+fn prefetch<T>(x: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+        let p = (x as *const T).cast::<i8>();
+        let n = std::mem::size_of::<T>();
+        for off in (0..n).step_by(64).chain(std::iter::once(n - 1)) {
+            // SAFETY: a prefetch never faults and `p + off` is inside `x`.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.add(off)) };
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = x;
+}
+
+/// The work-list entry of splat `id` in the tile with pixel rectangle `rect` (`halves` unset)
+/// and its chord data, or `None` when its box misses the tile.
 #[inline(always)]
 fn tile_entry<R: Real>(
     packed: &[Option<Packed<R>>],
     [rx0, rx1, ry0, ry1]: [u32; 4],
     id: u32,
-    with_halves: bool,
-) -> Option<Entry<R>> {
+) -> Option<(Entry<R>, [f64; 6])> {
     let Packed { e, chord } = packed[id as usize].as_ref()?;
     let (x0, x1) = (e.x0.max(rx0), e.x1.min(rx1));
     let (y0, y1) = (e.y0.max(ry0), e.y1.min(ry1));
     if !(x0 < x1 && y0 < y1) {
         return None;
     }
-    let mut bits = 0u32;
-    if with_halves {
-        for row in y0..y1 {
-            let [h0, h1] = halves(chord, row as usize, rx0 as usize);
-            bits |= half_bits([h0, h1], (row - ry0) as usize);
-        }
-    }
-    Some(Entry {
+    let e = Entry {
         x0,
         x1,
         y0,
         y1,
-        halves: bits,
         ..*e
-    })
-}
-
-/// The bits of [`Entry::halves`] for tile row `r`.
-#[inline(always)]
-pub(super) fn half_bits([h0, h1]: [bool; 2], r: usize) -> u32 {
-    ((h0 as u32) << (2 * r)) | ((h1 as u32) << (2 * r + 1))
+    };
+    Some((e, *chord))
 }
 
 /// Number of (pixel, splat) evaluations the kernels may perform: the sum over tiles of the
@@ -209,7 +232,7 @@ pub fn box_pixels<R: Real>(splats: &Splats<R>, bins: &TileBins) -> u64 {
     let packed = pack(splats, bins);
     (0..bins.n_tiles())
         .map(|t| {
-            tile_entries(&packed, bins, t, false)
+            tile_entries(&packed, bins, t)
                 .iter()
                 .map(|e| ((e.x1 - e.x0) * (e.y1 - e.y0)) as u64)
                 .sum::<u64>()
