@@ -12,6 +12,7 @@
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use super::act::{self, Rows};
 use super::gemm;
 use crate::error::{Error, Result};
 use crate::real::Real;
@@ -157,15 +158,18 @@ impl Mlp {
             let (enc, next_in) = if skip { (ed, ed + hd) } else { (0, hd) };
             let (pre, inputs) = (&ws.pre[i], &mut ws.inputs[i + 1]);
             fit(inputs, n * next_in);
-            for r in 0..n {
-                let row = &mut inputs[r * next_in..(r + 1) * next_in];
-                if skip {
-                    row[..enc].copy_from_slice(&x[r * ed..(r + 1) * ed]);
-                }
-                for (h, &z) in row[enc..].iter_mut().zip(&pre[r * hd..(r + 1) * hd]) {
-                    *h = if z > R::zero() { z } else { z * slope };
+            if skip {
+                for r in 0..n {
+                    inputs[r * next_in..r * next_in + enc]
+                        .copy_from_slice(&x[r * ed..(r + 1) * ed]);
                 }
             }
+            let dense = Rows { ld: hd, off: 0 };
+            let dst = Rows {
+                ld: next_in,
+                off: enc,
+            };
+            act::leaky(simd, pre, dense, pre, n, hd, slope, inputs, dst);
         }
     }
 
@@ -257,16 +261,9 @@ impl Mlp {
             }
             let zprev = &ws.pre[i - 1];
             fit(&mut ws.g_next, n * hid);
-            for r in 0..n {
-                for k in 0..hid {
-                    let d = dx[r * inp + enc + k];
-                    ws.g_next[r * hid + k] = if zprev[r * hid + k] > R::zero() {
-                        d
-                    } else {
-                        d * slope
-                    };
-                }
-            }
+            let src = Rows { ld: inp, off: enc };
+            let dense = Rows { ld: hid, off: 0 };
+            act::leaky(simd, dx, src, zprev, n, hid, slope, &mut ws.g_next, dense);
             std::mem::swap(&mut ws.g, &mut ws.g_next);
         }
     }

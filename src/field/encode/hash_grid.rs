@@ -144,6 +144,27 @@ impl HashGrid {
         }
     }
 
+    /// Encode a block of points (`out`: `L * F` values per point), level after level: the
+    /// samples of a block touch one level's table at a time, which then stays in cache (the
+    /// values are those of [`HashGrid::encode`], bit for bit).
+    pub fn encode_block<R: Real>(&self, table: &[R], xs: &[[R; 3]], out: &mut [R]) {
+        let nf = self.features;
+        let ed = self.levels * nf;
+        for l in 0..self.levels {
+            let lt = &table[self.offsets[l] * nf..self.offsets[l + 1] * nf];
+            for (&x, o) in xs.iter().zip(out.chunks_exact_mut(ed)) {
+                let (idx, w) = self.corners(x, l);
+                for ch in 0..nf {
+                    let mut acc = R::zero();
+                    for c in 0..8 {
+                        acc += w[c] * lt[idx[c] * nf + ch];
+                    }
+                    o[l * nf + ch] = acc;
+                }
+            }
+        }
+    }
+
     /// Accumulate the table gradient of `sum g . encode(x)` over the points `xs`, with
     /// `g_out[n * g_stride + g_off ..]` the gradient of point `n`'s encoding.
     pub fn backward<R: Real>(
