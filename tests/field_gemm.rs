@@ -318,7 +318,12 @@ fn training_iterations_are_bit_identical_for_threads_and_simd_paths() {
 fn elementwise_passes_match_plain_loops_on_every_path() {
     use unispine::field::act::{self, Rows};
     let mut rng = ChaCha8Rng::seed_from_u64(9);
-    for &(n, w, ld, off) in &[(1, 1, 1, 0), (7, 5, 9, 3), (33, 32, 48, 16), (100, 39, 295, 256)] {
+    for &(n, w, ld, off) in &[
+        (1, 1, 1, 0),
+        (7, 5, 9, 3),
+        (33, 32, 48, 16),
+        (100, 39, 295, 256),
+    ] {
         let mut d = rand_vec(&mut rng, off + n * ld);
         d[off] = 0.0;
         let mut z = rand_vec(&mut rng, n * w);
