@@ -4,8 +4,10 @@
 //! (weights and biases U(-1/sqrt(fan_in), 1/sqrt(fan_in))).
 //!
 //! Batched: a block of samples goes through each layer as a matrix product ([`gemm`]: blocked,
-//! register-tiled, AVX2 or scalar with the same bits) in which every sum runs in a fixed
-//! sequential order whatever the block, the instruction set and the thread count.
+//! register-tiled, AVX-512, AVX2 or scalar with the same bits) in which every sum runs in a
+//! fixed sequential order whatever the block, the instruction set and the thread count; the
+//! LeakyReLU passes and bias-gradient sums between the products run on [`act`] (element-wise,
+//! same bits on every path).
 //!
 //! Parameter layout (flat): for each layer, `W` as `[in][out]` (input-major) then `b[out]`.
 
