@@ -14,7 +14,7 @@ use unispine::field::{Field, FieldConfig};
 use unispine::simd::Simd;
 
 /// Shapes `(rows, inner, cols)`: tile multiples, ragged edges below every tile size, the MLP's.
-const SHAPES: [(usize, usize, usize); 12] = [
+const SHAPES: [(usize, usize, usize); 19] = [
     (1, 1, 1),
     (3, 5, 7),
     (7, 16, 15),
@@ -27,6 +27,16 @@ const SHAPES: [(usize, usize, usize); 12] = [
     (200, 32, 1),
     (11, 1, 40),
     (130, 319, 47),
+    // Larger than a row block (96) and an inner block (128), remainder panels of every width
+    // class, and one or a few output columns (`dW` with rows in the vector lanes: 64, 16 and
+    // single-row remainders).
+    (300, 300, 20),
+    (97, 129, 50),
+    (1030, 40, 1),
+    (200, 70, 1),
+    (150, 85, 5),
+    (129, 256, 1),
+    (40, 3, 300),
 ];
 
 fn rand_vec(rng: &mut ChaCha8Rng, n: usize) -> Vec<f32> {
@@ -297,6 +307,52 @@ fn training_iterations_are_bit_identical_for_threads_and_simd_paths() {
         assert_ne!(runs[0].2, init, "training changed nothing");
         for (t, s, b) in &runs[1..] {
             assert!(b == &runs[0].2, "{t} threads, {s:?}: bits differ");
+        }
+    }
+}
+
+/// The element-wise passes between the products (LeakyReLU forward / backward over row-strided
+/// blocks, column sums of `db`): every SIMD path gives the bits of the plain loops, including
+/// negative values, zeros and widths that are not a multiple of any vector width.
+#[test]
+fn elementwise_passes_match_plain_loops_on_every_path() {
+    use unispine::field::act::{self, Rows};
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    for &(n, w, ld, off) in &[
+        (1, 1, 1, 0),
+        (7, 5, 9, 3),
+        (33, 32, 48, 16),
+        (100, 39, 295, 256),
+    ] {
+        let mut d = rand_vec(&mut rng, off + n * ld);
+        d[off] = 0.0;
+        let mut z = rand_vec(&mut rng, n * w);
+        z[0] = 0.0;
+        let slope = 0.01f32;
+        let mut want = vec![f32::NAN; n * w];
+        for r in 0..n {
+            for k in 0..w {
+                let dv = d[off + r * ld + k];
+                want[r * w + k] = if z[r * w + k] > 0.0 { dv } else { dv * slope };
+            }
+        }
+        let mut want_sum = rand_vec(&mut rng, w);
+        let acc0 = want_sum.clone();
+        for r in 0..n {
+            for k in 0..w {
+                want_sum[k] += z[r * w + k];
+            }
+        }
+        for simd in Simd::supported_paths() {
+            let mut got = vec![f32::NAN; n * w];
+            let src = Rows { ld, off };
+            let dense = Rows { ld: w, off: 0 };
+            act::leaky(simd, &d, src, &z, n, w, slope, &mut got, dense);
+            let b = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(b(&got), b(&want), "leaky {simd:?} ({n},{w},{ld},{off})");
+            let mut sum = acc0.clone();
+            act::sum_rows(simd, &z, n, w, &mut sum);
+            assert_eq!(b(&sum), b(&want_sum), "sum_rows {simd:?} ({n},{w})");
         }
     }
 }

@@ -58,8 +58,12 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     } else {
         vec![simd, Simd::Scalar]
     };
+    let mut mlp_frac = None;
     for p in paths {
         let m = time_mlp(&naf, p, args.reps)?;
+        if p == simd {
+            mlp_frac = Some((m.flops / m.wall / peak_all, m.flops / m.cpu / peak_core));
+        }
         let g = m.flops / m.wall;
         let gc = m.flops / m.cpu;
         println!(
@@ -100,6 +104,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         "cpu"
     );
     let mut hwm_naf_full = None;
+    let mut iter_s = Vec::new();
     for name in &args.presets {
         let cfg = FieldConfig::preset(name, VIEWS)?;
         let n = if cfg.reduced { iters_per_preset } else { 1 };
@@ -119,6 +124,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
             t.wall * 1e3,
             t.cpu * 1e3
         );
+        iter_s.push((name.clone(), cfg.label(), t.wall, t.cpu));
         if name == "naf-full" {
             hwm_naf_full = crate::eval::peak_memory_bytes();
         }
@@ -131,5 +137,68 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
             b as f64 / (2u64 << 30) as f64
         );
     }
+    print_targets(threads, mlp_frac, &iter_s, hwm_naf_full);
     Ok(())
+}
+
+/// Whether `ok`, as printed.
+fn verdict(ok: bool) -> &'static str {
+    if ok {
+        "reached"
+    } else {
+        "NOT reached"
+    }
+}
+
+/// The targets of the speed and memory requirements next to the figures of this run: the
+/// MLP's fraction of the peak (wall against the all-thread peak, and CPU time against the
+/// per-core peak), seconds per iteration of the reduced NAF and NeRF (wall, and process CPU
+/// time / threads: what the iteration costs on otherwise idle cores), the full presets' cost,
+/// and the peak memory of naf-full.
+fn print_targets(
+    threads: usize,
+    mlp_frac: Option<(f64, f64)>,
+    iter_s: &[(String, String, f64, f64)],
+    hwm_naf_full: Option<u64>,
+) {
+    println!("targets (fraction reached = target / figure for times and memory, figure / target for the rate):");
+    if let Some((wall, core)) = mlp_frac {
+        println!(
+            "  MLP forward + backward at the NAF width: {:.0}% of the {threads}-thread peak \
+             (wall), {:.0}% of the per-core peak (CPU time); target >= 50%: {:.2} ({})",
+            100.0 * wall,
+            100.0 * core,
+            wall.max(core) / 0.5,
+            verdict(wall.max(core) >= 0.5)
+        );
+    }
+    for (name, limit) in [("naf", 0.05), ("nerf", 0.5)] {
+        if let Some((_, label, wall, cpu)) = iter_s.iter().find(|r| r.0 == name) {
+            let busy = cpu / threads as f64;
+            println!(
+                "  {label}: {wall:.3} s per iteration wall, {busy:.3} s CPU / {threads} threads; \
+                 target <= {limit} s: {:.2} ({})",
+                limit / wall.min(busy),
+                verdict(wall.min(busy) <= limit)
+            );
+        }
+    }
+    for (name, label, wall, cpu) in iter_s.iter().filter(|r| r.0.ends_with("-full")) {
+        let cfg = FieldConfig::preset(name, VIEWS).ok();
+        let iters = cfg.map_or(0, |c| c.iterations);
+        let busy = cpu / threads as f64;
+        println!(
+            "  {label}: {wall:.2} s per iteration wall, {busy:.2} s CPU / {threads} threads; \
+             {iters} iterations ({VIEWS} views) = {:.1} h at the CPU figure",
+            busy * iters as f64 / 3600.0
+        );
+    }
+    if let Some(b) = hwm_naf_full {
+        println!(
+            "  naf-full peak resident memory: {:.0} MiB; target <= 2048 MiB: {:.2} ({})",
+            b as f64 / (1 << 20) as f64,
+            (2u64 << 30) as f64 / b as f64,
+            verdict(b <= 2u64 << 30)
+        );
+    }
 }

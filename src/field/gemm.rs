@@ -1,9 +1,14 @@
 //! The matrix products of the field MLP: one strided kernel
-//! `C[i][j] = init[i][j] + sum_t A(i, t) B[t][j]` (t in order), cache-blocked over rows,
-//! register-tiled (a tile of rows x columns held in registers across the whole sum), and
-//! compiled three times from the same source: for the baseline target ([`Simd::Scalar`], 4 x 8
-//! tiles of SSE2 vectors), with AVX2 ([`Simd::Avx2`], 6 x 16: two 8-lane vectors per row) and
-//! with AVX-512 ([`Simd::Avx512`], 8 x 32: two 16-lane vectors per row).
+//! `C[i][j] = init[i][j] + sum_t A(i, t) B[t][j]` (t in order), cache-blocked over rows and
+//! over the inner dimension, register-tiled (a tile of rows x columns held in registers across
+//! an inner block), and compiled three times from the same source: for the baseline target
+//! ([`Simd::Scalar`], 4 x 8 tiles of SSE2 vectors), with AVX2 ([`Simd::Avx2`], 6 x 16: two
+//! 8-lane vectors per row) and with AVX-512 ([`Simd::Avx512`], 8 x 32: two 16-lane vectors per
+//! row). Column remainders narrower than a tile run the same vector tile on a zero-padded copy
+//! of the last columns of `B` (a per-thread buffer reused across calls), and products with a
+//! single column or a few columns and a column-major `A` (`dW` of the output layer) keep
+//! consecutive rows of `C` in the vector lanes instead, so no shape falls back to scalar chains
+//! stored to memory at every step.
 //!
 //! Each element of `C` is one chain of IEEE-754 operations: start from its initial value, then
 //! for t = 0, 1, ... multiply `A(i, t) B[t][j]` and add (a separate multiply and add, never
@@ -23,12 +28,18 @@
 //! loops with the same operation order.
 
 use std::any::TypeId;
+use std::cell::RefCell;
 
 use crate::real::Real;
 use crate::simd::Simd;
 
-/// Rows per cache block (the block of `A` stays in L2 while the panels of `B` pass through L1).
+/// Rows per cache block (the rows of `A` of a block stay in L2 while the panels of `B` pass
+/// through L1).
 const MC: usize = 96;
+
+/// Inner-dimension block: a `KC x NR` slice of a panel of `B` (16 KiB at `NR` = 32) stays in
+/// L1 while every tile of a row block runs over it.
+const KC: usize = 128;
 
 /// Layout of the left operand: `A(i, t) = a[i * row_stride + t * col_stride]`.
 #[derive(Clone, Copy, Debug)]
@@ -52,132 +63,262 @@ struct Operands<'a> {
     kk: usize,
 }
 
+thread_local! {
+    /// The zero-padded remainder panel of `B` of the calling thread (grown once, reused by
+    /// every product).
+    static PANEL: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
+}
+
 /// Cache-blocked product with `MR x NR` register tiles (tiles with fewer rows at the bottom
-/// edge use the same kernel with fewer rows; a column remainder of at least `NH` a half-width
-/// tile; narrower remainders go through [`tile_edge`]).
+/// edge of a row block use the same kernel with fewer rows). Full column panels read `B` in
+/// place; the column remainder is copied into a panel of `NR` (more than `NH` columns left)
+/// or `NH` columns padded with zeros, so that it runs the same vector kernel (the padding
+/// columns are computed and dropped). A product with fewer than `NH` columns whose `A` is
+/// column-major (`row_stride` 1: `dW` of the output layer) runs [`narrow`] instead.
 #[inline(always)]
-fn kernel_generic<const MR: usize, const NR: usize, const NH: usize>(o: Operands, c: &mut [f32]) {
+fn kernel_generic<
+    const MR: usize,
+    const NR: usize,
+    const NH: usize,
+    const L: usize,
+    const V: usize,
+>(
+    o: Operands,
+    c: &mut [f32],
+) {
+    if o.kk == 0 {
+        if let Some(bv) = o.bias {
+            for i in 0..o.m {
+                c[i * o.ldc..i * o.ldc + o.nn].copy_from_slice(&bv[..o.nn]);
+            }
+        }
+        return;
+    }
+    if o.nn < NH && o.al.row_stride == 1 {
+        return narrow::<L, V>(&o, c);
+    }
+    // The remainder panel: columns `jr ..` (`jw` of them) in `pw` padded columns. The buffer
+    // is taken out of the thread-local cell (and put back) rather than used in a closure, so
+    // that the tiles compile with the instruction set of the caller.
+    let jr = o.nn / NR * NR;
+    let (pw, jw) = match o.nn - jr {
+        0 => (0, 0),
+        w if w > NH => (NR, w),
+        w => (NH, w),
+    };
+    let mut buf = PANEL.with(|cell| cell.take());
+    if pw > 0 {
+        buf.clear();
+        buf.resize(o.kk * pw, 0.0);
+        for t in 0..o.kk {
+            buf[t * pw..t * pw + jw].copy_from_slice(&o.b[t * o.ldb + jr..t * o.ldb + jr + jw]);
+        }
+    }
     let mut i0 = 0;
     while i0 < o.m {
         let i1 = (i0 + MC).min(o.m);
         let mut j0 = 0;
         while j0 < o.nn {
-            let jw = match o.nn - j0 {
-                w if w >= NR => NR,
-                w if w >= NH => NH,
-                w => w,
-            };
-            let mut i = i0;
-            while i < i1 {
-                let iw = (i1 - i).min(MR);
-                if jw == NR {
-                    // SAFETY: `kernel` checked that every index of the product is in bounds.
-                    unsafe { tile_rows::<MR, NR>(&o, c, i, iw, j0) };
-                } else if jw == NH {
-                    // SAFETY: as above.
-                    unsafe { tile_rows::<MR, NH>(&o, c, i, iw, j0) };
-                } else {
-                    tile_edge(&o, c, i, iw, j0, jw);
+            let (w, used) = if j0 < jr { (NR, NR) } else { (pw, jw) };
+            let mut k0 = 0;
+            while k0 < o.kk {
+                let k1 = (k0 + KC).min(o.kk);
+                let s = Span {
+                    j0,
+                    jw: used,
+                    k0,
+                    k1,
+                };
+                let mut i = i0;
+                while i < i1 {
+                    let iw = (i1 - i).min(MR);
+                    // SAFETY: `kernel` checked that every index of the product is in bounds;
+                    // the padded panel holds `kk x pw` values.
+                    unsafe {
+                        if j0 < jr {
+                            let bp = o.b.as_ptr().add(k0 * o.ldb + j0);
+                            tile_rows::<MR, NR>(&o, bp, o.ldb, c, i, iw, s)
+                        } else if w == NR {
+                            let bp = buf.as_ptr().add(k0 * pw);
+                            tile_rows::<MR, NR>(&o, bp, pw, c, i, iw, s)
+                        } else {
+                            let bp = buf.as_ptr().add(k0 * pw);
+                            tile_rows::<MR, NH>(&o, bp, pw, c, i, iw, s)
+                        }
+                    };
+                    i += iw;
                 }
-                i += iw;
+                k0 = k1;
             }
-            j0 += jw;
+            j0 += used;
         }
         i0 = i1;
     }
+    PANEL.with(|cell| cell.replace(buf));
 }
 
-/// Rows `i .. i + iw` (`iw <= MR`) by columns `j0 .. j0 + NR`, accumulators in registers.
+/// The columns `j0 .. j0 + jw` and the inner range `k0 .. k1` of a tile.
+#[derive(Clone, Copy)]
+struct Span {
+    j0: usize,
+    jw: usize,
+    k0: usize,
+    k1: usize,
+}
+
+/// Rows `i .. i + iw` (`iw <= MR`) of one panel, accumulators in registers.
 ///
 /// # Safety
-/// Every index of rows `i .. i + iw`, columns `j0 .. j0 + NR` and `t < kk` must be in bounds
-/// (checked once by [`kernel`]).
+/// Every index of rows `i .. i + iw`, columns `j0 .. j0 + jw` and `t < kk` must be in bounds
+/// (checked once by [`kernel`]); `bp` points at `B[k0][j0]` of a panel with rows `ldp` apart
+/// that holds `W` readable columns for every `t` in `k0 .. k1`.
 #[inline(always)]
-unsafe fn tile_rows<const MR: usize, const NR: usize>(
+unsafe fn tile_rows<const MR: usize, const W: usize>(
     o: &Operands,
+    bp: *const f32,
+    ldp: usize,
     c: &mut [f32],
     i: usize,
     iw: usize,
-    j0: usize,
+    s: Span,
 ) {
     // SAFETY: as this function's contract.
     unsafe {
         match iw {
-            n if n == MR => tile::<MR, NR>(o, c, i, j0),
-            1 => tile::<1, NR>(o, c, i, j0),
-            2 => tile::<2, NR>(o, c, i, j0),
-            3 => tile::<3, NR>(o, c, i, j0),
-            4 => tile::<4, NR>(o, c, i, j0),
-            5 => tile::<5, NR>(o, c, i, j0),
-            6 => tile::<6, NR>(o, c, i, j0),
-            7 => tile::<7, NR>(o, c, i, j0),
+            n if n == MR => tile::<MR, W>(o, bp, ldp, c, i, s),
+            1 => tile::<1, W>(o, bp, ldp, c, i, s),
+            2 => tile::<2, W>(o, bp, ldp, c, i, s),
+            3 => tile::<3, W>(o, bp, ldp, c, i, s),
+            4 => tile::<4, W>(o, bp, ldp, c, i, s),
+            5 => tile::<5, W>(o, bp, ldp, c, i, s),
+            6 => tile::<6, W>(o, bp, ldp, c, i, s),
+            7 => tile::<7, W>(o, bp, ldp, c, i, s),
+            8 => tile::<8, W>(o, bp, ldp, c, i, s),
+            9 => tile::<9, W>(o, bp, ldp, c, i, s),
+            10 => tile::<10, W>(o, bp, ldp, c, i, s),
+            11 => tile::<11, W>(o, bp, ldp, c, i, s),
+            12 => tile::<12, W>(o, bp, ldp, c, i, s),
+            13 => tile::<13, W>(o, bp, ldp, c, i, s),
+            14 => tile::<14, W>(o, bp, ldp, c, i, s),
+            15 => tile::<15, W>(o, bp, ldp, c, i, s),
             _ => {
                 for r in i..i + iw {
-                    tile::<1, NR>(o, c, r, j0)
+                    tile::<1, W>(o, bp, ldp, c, r, s)
                 }
             }
         }
     }
 }
 
-/// One `R x NR` tile: the accumulators start from the initial values, then for each `t` in
-/// order `acc[r][j] += A(i + r, t) * B[t][j0 + j]`.
+/// One `R x W` tile: the accumulators start from the initial values (the bias or `C` for the
+/// first inner block, `C` after), then for each `t` in `k0 .. k1` in order
+/// `acc[r][j] += A(i + r, t) * B[t][j0 + j]`; the first `jw` columns are stored.
 ///
 /// # Safety
 /// As [`tile_rows`].
 #[inline(always)]
-unsafe fn tile<const R: usize, const NR: usize>(o: &Operands, c: &mut [f32], i: usize, j0: usize) {
+unsafe fn tile<const R: usize, const W: usize>(
+    o: &Operands,
+    bp: *const f32,
+    ldp: usize,
+    c: &mut [f32],
+    i: usize,
+    s: Span,
+) {
     // SAFETY: as this function's contract.
     unsafe {
-        let mut acc = [[0.0f32; NR]; R];
+        let mut acc = [[0.0f32; W]; R];
         let cp = c.as_mut_ptr();
         for (r, row) in acc.iter_mut().enumerate() {
             let src = match o.bias {
-                Some(bv) => bv.as_ptr().add(j0),
-                None => cp.add((i + r) * o.ldc + j0) as *const f32,
+                Some(bv) if s.k0 == 0 => bv.as_ptr().add(s.j0),
+                _ => cp.add((i + r) * o.ldc + s.j0) as *const f32,
             };
-            for (j, v) in row.iter_mut().enumerate() {
-                *v = *src.add(j);
+            if s.jw == W {
+                for (j, v) in row.iter_mut().enumerate() {
+                    *v = *src.add(j);
+                }
+            } else {
+                // Through a copy: indexing the accumulators by a run-time bound would keep
+                // them in memory.
+                let mut tmp = [0.0f32; W];
+                std::ptr::copy_nonoverlapping(src, tmp.as_mut_ptr(), s.jw);
+                *row = tmp;
             }
         }
-        let ap = o.a.as_ptr();
-        let bp = o.b.as_ptr().add(j0);
         let (rs, cs) = (o.al.row_stride, o.al.col_stride);
-        for t in 0..o.kk {
-            let bt = bp.add(t * o.ldb);
-            let mut bv = [0.0f32; NR];
+        let ap = o.a.as_ptr().add(i * rs);
+        let mut bp = bp;
+        for t in s.k0..s.k1 {
+            let mut bv = [0.0f32; W];
             for (j, v) in bv.iter_mut().enumerate() {
-                *v = *bt.add(j);
+                *v = *bp.add(j);
             }
+            bp = bp.add(ldp);
+            let at = ap.add(t * cs);
             for (r, row) in acc.iter_mut().enumerate() {
-                let av = *ap.add((i + r) * rs + t * cs);
-                for j in 0..NR {
+                let av = *at.add(r * rs);
+                for j in 0..W {
                     row[j] += av * bv[j];
                 }
             }
         }
         for (r, row) in acc.iter().enumerate() {
-            let dst = cp.add((i + r) * o.ldc + j0);
-            for (j, v) in row.iter().enumerate() {
-                *dst.add(j) = *v;
+            let dst = cp.add((i + r) * o.ldc + s.j0);
+            if s.jw == W {
+                for (j, v) in row.iter().enumerate() {
+                    *dst.add(j) = *v;
+                }
+            } else {
+                let tmp = *row;
+                std::ptr::copy_nonoverlapping(tmp.as_ptr(), dst, s.jw);
             }
         }
     }
 }
 
-/// A tile narrower than the register tile (`jw` columns): the same chain per element.
+/// A product with few columns and a column-major `A` (`A(i, t) = a[i + t * col_stride]`):
+/// `L` consecutive rows of one column of `C` are the accumulators (vector lanes), so each
+/// element keeps its own chain over `t` in order; rows left over run `V` (one vector) or one at a time.
 #[inline(always)]
-fn tile_edge(o: &Operands, c: &mut [f32], i: usize, iw: usize, j0: usize, jw: usize) {
-    for r in i..i + iw {
-        let cr = &mut c[r * o.ldc + j0..][..jw];
-        if let Some(bv) = o.bias {
-            cr.copy_from_slice(&bv[j0..j0 + jw]);
+fn narrow<const L: usize, const V: usize>(o: &Operands, c: &mut [f32]) {
+    let mut i = 0;
+    while i < o.m {
+        let rem = o.m - i;
+        let step = if rem >= L {
+            narrow_rows::<L>(o, c, i);
+            L
+        } else if rem >= V {
+            narrow_rows::<V>(o, c, i);
+            V
+        } else {
+            narrow_rows::<1>(o, c, i);
+            1
+        };
+        i += step;
+    }
+}
+
+/// Rows `i .. i + L` of every column of a [`narrow`] product.
+#[inline(always)]
+fn narrow_rows<const L: usize>(o: &Operands, c: &mut [f32], i: usize) {
+    for j in 0..o.nn {
+        let mut acc = [0.0f32; L];
+        for (r, v) in acc.iter_mut().enumerate() {
+            *v = match o.bias {
+                Some(bv) => bv[j],
+                None => c[(i + r) * o.ldc + j],
+            };
         }
         for t in 0..o.kk {
-            let av = o.a[r * o.al.row_stride + t * o.al.col_stride];
-            for (cv, &bv) in cr.iter_mut().zip(&o.b[t * o.ldb + j0..][..jw]) {
-                *cv += av * bv;
+            let bv = o.b[t * o.ldb + j];
+            let at = &o.a[i + t * o.al.col_stride..][..L];
+            for (v, &av) in acc.iter_mut().zip(at) {
+                *v += av * bv;
             }
+        }
+        for (r, v) in acc.iter().enumerate() {
+            c[(i + r) * o.ldc + j] = *v;
         }
     }
 }
@@ -186,19 +327,19 @@ fn tile_edge(o: &Operands, c: &mut [f32], i: usize, iw: usize, j0: usize, jw: us
 #[target_feature(enable = "avx2")]
 unsafe fn kernel_avx2(o: Operands, c: &mut [f32]) {
     // 6 x 16: 12 accumulators of 8 lanes, two of B, a broadcast and a product (16 registers).
-    kernel_generic::<6, 16, 8>(o, c)
+    kernel_generic::<6, 16, 8, 32, 8>(o, c)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
 unsafe fn kernel_avx512(o: Operands, c: &mut [f32]) {
     // 8 x 32: 16 accumulators of 16 lanes out of 32 registers.
-    kernel_generic::<8, 32, 16>(o, c)
+    kernel_generic::<8, 32, 16, 64, 16>(o, c)
 }
 
 fn kernel_scalar(o: Operands, c: &mut [f32]) {
     // 4 x 8: 8 accumulators of 4 SSE2 lanes.
-    kernel_generic::<4, 8, 4>(o, c)
+    kernel_generic::<4, 8, 4, 16, 4>(o, c)
 }
 
 /// Check the bounds of the product once, then run the kernel of `simd` (or the widest
@@ -351,11 +492,7 @@ pub fn grad_weight<R: Real>(
     gw: &mut [R],
     gb: &mut [R],
 ) {
-    for r in 0..n {
-        for (a, &gv) in gb.iter_mut().zip(&g[r * out..(r + 1) * out]) {
-            *a += gv;
-        }
-    }
+    super::act::sum_rows(simd, g, n, out, gb);
     if let (Some(x), Some(g)) = (as_f32(x), as_f32(g)) {
         let gw = as_f32_mut(gw).expect("same type as x");
         let o = Operands {

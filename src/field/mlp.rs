@@ -4,14 +4,17 @@
 //! (weights and biases U(-1/sqrt(fan_in), 1/sqrt(fan_in))).
 //!
 //! Batched: a block of samples goes through each layer as a matrix product ([`gemm`]: blocked,
-//! register-tiled, AVX2 or scalar with the same bits) in which every sum runs in a fixed
-//! sequential order whatever the block, the instruction set and the thread count.
+//! register-tiled, AVX-512, AVX2 or scalar with the same bits) in which every sum runs in a
+//! fixed sequential order whatever the block, the instruction set and the thread count; the
+//! LeakyReLU passes and bias-gradient sums between the products run on [`act`] (element-wise,
+//! same bits on every path).
 //!
 //! Parameter layout (flat): for each layer, `W` as `[in][out]` (input-major) then `b[out]`.
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use super::act::{self, Rows};
 use super::gemm;
 use crate::error::{Error, Result};
 use crate::real::Real;
@@ -157,15 +160,18 @@ impl Mlp {
             let (enc, next_in) = if skip { (ed, ed + hd) } else { (0, hd) };
             let (pre, inputs) = (&ws.pre[i], &mut ws.inputs[i + 1]);
             fit(inputs, n * next_in);
-            for r in 0..n {
-                let row = &mut inputs[r * next_in..(r + 1) * next_in];
-                if skip {
-                    row[..enc].copy_from_slice(&x[r * ed..(r + 1) * ed]);
-                }
-                for (h, &z) in row[enc..].iter_mut().zip(&pre[r * hd..(r + 1) * hd]) {
-                    *h = if z > R::zero() { z } else { z * slope };
+            if skip {
+                for r in 0..n {
+                    inputs[r * next_in..r * next_in + enc]
+                        .copy_from_slice(&x[r * ed..(r + 1) * ed]);
                 }
             }
+            let dense = Rows { ld: hd, off: 0 };
+            let dst = Rows {
+                ld: next_in,
+                off: enc,
+            };
+            act::leaky(simd, pre, dense, pre, n, hd, slope, inputs, dst);
         }
     }
 
@@ -257,16 +263,9 @@ impl Mlp {
             }
             let zprev = &ws.pre[i - 1];
             fit(&mut ws.g_next, n * hid);
-            for r in 0..n {
-                for k in 0..hid {
-                    let d = dx[r * inp + enc + k];
-                    ws.g_next[r * hid + k] = if zprev[r * hid + k] > R::zero() {
-                        d
-                    } else {
-                        d * slope
-                    };
-                }
-            }
+            let src = Rows { ld: inp, off: enc };
+            let dense = Rows { ld: hid, off: 0 };
+            act::leaky(simd, dx, src, zprev, n, hid, slope, &mut ws.g_next, dense);
             std::mem::swap(&mut ws.g, &mut ws.g_next);
         }
     }

@@ -24,6 +24,7 @@
 //!
 //! `--iters N` replaces the iteration count and scales the StepLR step in proportion.
 
+pub mod act;
 pub mod adam;
 pub mod bench;
 pub mod encode;
@@ -526,11 +527,10 @@ impl<R: Real> Field<R> {
 
     /// [`Field::encode`] into `out` (`n x out_dim`).
     pub fn encode_into(&self, pts: &[[R; 3]], out: &mut [R]) {
-        let e = self.encoder.out_dim();
         let ep = &self.params[..self.n_encoder_params()];
-        for (p, o) in pts.iter().zip(out.chunks_mut(e)) {
-            self.encoder.encode(ep, *p, o);
-        }
+        let e = self.encoder.out_dim();
+        self.encoder
+            .encode_block(ep, pts, &mut out[..pts.len() * e]);
     }
 
     /// Attenuation at a block of points.

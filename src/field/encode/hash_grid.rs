@@ -10,11 +10,17 @@
 //!
 //! Backward: `dT_l[idx_c] += w_c g_l` per corner. The scatter is done level by level (levels in
 //! parallel, the samples of a level in order), so the gradient is bit-identical for any
-//! thread count and no atomics are needed.
+//! thread count and no atomics are needed. Forward over a block and backward both run one level
+//! at a time and compute the corners of a chunk of points before touching the table.
 
 use rayon::prelude::*;
 
 use crate::real::Real;
+
+/// Points whose corners are computed before their table entries are read or written: the
+/// loads of a chunk do not wait on one another's corner arithmetic, so their cache misses
+/// overlap (same values and the same scatter order as point by point).
+const CHUNK: usize = 64;
 
 /// torch-ngp's hash primes.
 const PRIMES: [u32; 3] = [1, 19_349_663, 83_492_791];
@@ -144,6 +150,32 @@ impl HashGrid {
         }
     }
 
+    /// Encode a block of points (`out`: `L * F` values per point), level after level: the
+    /// samples of a block touch one level's table at a time, which then stays in cache (the
+    /// values are those of [`HashGrid::encode`], bit for bit).
+    pub fn encode_block<R: Real>(&self, table: &[R], xs: &[[R; 3]], out: &mut [R]) {
+        let nf = self.features;
+        let ed = self.levels * nf;
+        let mut cw = [([0usize; 8], [R::zero(); 8]); CHUNK];
+        for l in 0..self.levels {
+            let lt = &table[self.offsets[l] * nf..self.offsets[l + 1] * nf];
+            for (xc, oc) in xs.chunks(CHUNK).zip(out.chunks_mut(CHUNK * ed)) {
+                for (v, &x) in cw.iter_mut().zip(xc) {
+                    *v = self.corners(x, l);
+                }
+                for ((idx, w), o) in cw.iter().zip(oc.chunks_exact_mut(ed)) {
+                    for ch in 0..nf {
+                        let mut acc = R::zero();
+                        for c in 0..8 {
+                            acc += w[c] * lt[idx[c] * nf + ch];
+                        }
+                        o[l * nf + ch] = acc;
+                    }
+                }
+            }
+        }
+    }
+
     /// Accumulate the table gradient of `sum g . encode(x)` over the points `xs`, with
     /// `g_out[n * g_stride + g_off ..]` the gradient of point `n`'s encoding.
     pub fn backward<R: Real>(
@@ -164,12 +196,18 @@ impl HashGrid {
             rest = b;
         }
         slices.into_par_iter().enumerate().for_each(|(l, gl)| {
-            for (n, &x) in xs.iter().enumerate() {
-                let (idx, w) = self.corners(x, l);
-                let g = &g_out[n * g_stride + g_off + l * nf..][..nf];
-                for c in 0..8 {
-                    for ch in 0..nf {
-                        gl[idx[c] * nf + ch] += w[c] * g[ch];
+            let mut cw = [([0usize; 8], [R::zero(); 8]); CHUNK];
+            for (k, xc) in xs.chunks(CHUNK).enumerate() {
+                for (v, &x) in cw.iter_mut().zip(xc) {
+                    *v = self.corners(x, l);
+                }
+                for (j, (idx, w)) in cw.iter().take(xc.len()).enumerate() {
+                    let n = k * CHUNK + j;
+                    let g = &g_out[n * g_stride + g_off + l * nf..][..nf];
+                    for c in 0..8 {
+                        for ch in 0..nf {
+                            gl[idx[c] * nf + ch] += w[c] * g[ch];
+                        }
                     }
                 }
             }
@@ -192,6 +230,34 @@ mod tests {
         assert_eq!(g.offsets[4] - g.offsets[3], 1 << 19);
         assert_eq!(g.offsets[16], 7_131_219);
         assert_eq!(g.n_params(), 14_262_438);
+    }
+
+    #[test]
+    fn block_encode_is_point_encode_bit_for_bit() {
+        // 4 levels (dense and hashed), 150 points: two full chunks and a partial one.
+        let g = HashGrid::new(4, 2, 10, 4, 0.5);
+        let table: Vec<f32> = (0..g.n_params())
+            .map(|i| ((i * 7919 % 1000) as f32 - 500.0) * 1e-3)
+            .collect();
+        let xs: Vec<[f32; 3]> = (0..150)
+            .map(|i| {
+                let t = i as f32 / 150.0;
+                [t - 0.5, 0.4 - 0.8 * t * t, (7.0 * t).sin() * 0.45]
+            })
+            .collect();
+        let ed = g.out_dim();
+        let mut block = vec![f32::NAN; xs.len() * ed];
+        g.encode_block(&table, &xs, &mut block);
+        let mut one = vec![f32::NAN; ed];
+        for (n, &x) in xs.iter().enumerate() {
+            g.encode(&table, x, &mut one);
+            let want: Vec<u32> = one.iter().map(|v| v.to_bits()).collect();
+            let got: Vec<u32> = block[n * ed..(n + 1) * ed]
+                .iter()
+                .map(|v| v.to_bits())
+                .collect();
+            assert_eq!(got, want, "point {n}");
+        }
     }
 
     #[test]

@@ -58,6 +58,20 @@ impl Encoder {
         }
     }
 
+    /// Encode a block of points (`out`: [`Encoder::out_dim`] values per point), as
+    /// [`Encoder::encode`] point by point (the hash grid runs level by level, same values).
+    pub fn encode_block<R: Real>(&self, params: &[R], xs: &[[R; 3]], out: &mut [R]) {
+        match self {
+            Encoder::HashGrid(h) => h.encode_block(params, xs, out),
+            _ => {
+                let e = self.out_dim();
+                for (p, o) in xs.iter().zip(out.chunks_mut(e)) {
+                    self.encode(params, *p, o);
+                }
+            }
+        }
+    }
+
     /// Accumulate the parameter gradient of `sum_n g_n . encode(x_n)`, with
     /// `g_out[n * g_stride + g_off ..]` the gradient of point `n`'s encoding (see
     /// [`HashGrid::backward`]); nothing for encoders without parameters. Bit-identical for any
