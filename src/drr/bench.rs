@@ -1,0 +1,1 @@
+//! DRR benchmark (placeholder, filled below).
