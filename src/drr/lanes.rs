@@ -91,15 +91,11 @@ unsafe impl Lanes for Avx512 {
     }
     #[inline(always)]
     unsafe fn splat_f(x: f32) -> __m512 {
-        unsafe {
-            _mm512_set1_ps(x)
-        }
+        unsafe { _mm512_set1_ps(x) }
     }
     #[inline(always)]
     unsafe fn splat_i(x: i32) -> __m512i {
-        unsafe {
-            _mm512_set1_epi32(x)
-        }
+        unsafe { _mm512_set1_epi32(x) }
     }
     #[inline(always)]
     unsafe fn mask_from_bits(bits: u32) -> __mmask16 {
@@ -111,15 +107,11 @@ unsafe impl Lanes for Avx512 {
     }
     #[inline(always)]
     unsafe fn le(a: __m512, b: __m512) -> __mmask16 {
-        unsafe {
-            _mm512_cmp_ps_mask::<_CMP_LE_OQ>(a, b)
-        }
+        unsafe { _mm512_cmp_ps_mask::<_CMP_LE_OQ>(a, b) }
     }
     #[inline(always)]
     unsafe fn eq_i(a: __m512i, b: __m512i) -> __mmask16 {
-        unsafe {
-            _mm512_cmpeq_epi32_mask(a, b)
-        }
+        unsafe { _mm512_cmpeq_epi32_mask(a, b) }
     }
     #[inline(always)]
     unsafe fn and(a: __mmask16, b: __mmask16) -> __mmask16 {
@@ -131,45 +123,31 @@ unsafe impl Lanes for Avx512 {
     }
     #[inline(always)]
     unsafe fn sel_f(m: __mmask16, a: __m512, b: __m512) -> __m512 {
-        unsafe {
-            _mm512_mask_blend_ps(m, b, a)
-        }
+        unsafe { _mm512_mask_blend_ps(m, b, a) }
     }
     #[inline(always)]
     unsafe fn sel_i(m: __mmask16, a: __m512i, b: __m512i) -> __m512i {
-        unsafe {
-            _mm512_mask_blend_epi32(m, b, a)
-        }
+        unsafe { _mm512_mask_blend_epi32(m, b, a) }
     }
     #[inline(always)]
     unsafe fn add(a: __m512, b: __m512) -> __m512 {
-        unsafe {
-            _mm512_add_ps(a, b)
-        }
+        unsafe { _mm512_add_ps(a, b) }
     }
     #[inline(always)]
     unsafe fn sub(a: __m512, b: __m512) -> __m512 {
-        unsafe {
-            _mm512_sub_ps(a, b)
-        }
+        unsafe { _mm512_sub_ps(a, b) }
     }
     #[inline(always)]
     unsafe fn mul(a: __m512, b: __m512) -> __m512 {
-        unsafe {
-            _mm512_mul_ps(a, b)
-        }
+        unsafe { _mm512_mul_ps(a, b) }
     }
     #[inline(always)]
     unsafe fn add_i(a: __m512i, b: __m512i) -> __m512i {
-        unsafe {
-            _mm512_add_epi32(a, b)
-        }
+        unsafe { _mm512_add_epi32(a, b) }
     }
     #[inline(always)]
     unsafe fn gather(m: __mmask16, idx: __m512i, data: &[f32]) -> __m512 {
-        unsafe {
-            _mm512_mask_i32gather_ps::<4>(_mm512_setzero_ps(), m, idx, data.as_ptr())
-        }
+        unsafe { _mm512_mask_i32gather_ps::<4>(_mm512_setzero_ps(), m, idx, data.as_ptr()) }
     }
 }
 
@@ -213,15 +191,11 @@ unsafe impl Lanes for Avx2 {
     }
     #[inline(always)]
     unsafe fn splat_f(x: f32) -> __m256 {
-        unsafe {
-            _mm256_set1_ps(x)
-        }
+        unsafe { _mm256_set1_ps(x) }
     }
     #[inline(always)]
     unsafe fn splat_i(x: i32) -> __m256i {
-        unsafe {
-            _mm256_set1_epi32(x)
-        }
+        unsafe { _mm256_set1_epi32(x) }
     }
     #[inline(always)]
     unsafe fn mask_from_bits(bits: u32) -> __m256i {
@@ -233,69 +207,47 @@ unsafe impl Lanes for Avx2 {
     }
     #[inline(always)]
     unsafe fn mask_bits(m: __m256i) -> u32 {
-        unsafe {
-            _mm256_movemask_ps(_mm256_castsi256_ps(m)) as u32
-        }
+        unsafe { _mm256_movemask_ps(_mm256_castsi256_ps(m)) as u32 }
     }
     #[inline(always)]
     unsafe fn le(a: __m256, b: __m256) -> __m256i {
-        unsafe {
-            _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LE_OQ>(a, b))
-        }
+        unsafe { _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LE_OQ>(a, b)) }
     }
     #[inline(always)]
     unsafe fn eq_i(a: __m256i, b: __m256i) -> __m256i {
-        unsafe {
-            _mm256_cmpeq_epi32(a, b)
-        }
+        unsafe { _mm256_cmpeq_epi32(a, b) }
     }
     #[inline(always)]
     unsafe fn and(a: __m256i, b: __m256i) -> __m256i {
-        unsafe {
-            _mm256_and_si256(a, b)
-        }
+        unsafe { _mm256_and_si256(a, b) }
     }
     #[inline(always)]
     unsafe fn andnot(a: __m256i, b: __m256i) -> __m256i {
-        unsafe {
-            _mm256_andnot_si256(a, b)
-        }
+        unsafe { _mm256_andnot_si256(a, b) }
     }
     #[inline(always)]
     unsafe fn sel_f(m: __m256i, a: __m256, b: __m256) -> __m256 {
-        unsafe {
-            _mm256_blendv_ps(b, a, _mm256_castsi256_ps(m))
-        }
+        unsafe { _mm256_blendv_ps(b, a, _mm256_castsi256_ps(m)) }
     }
     #[inline(always)]
     unsafe fn sel_i(m: __m256i, a: __m256i, b: __m256i) -> __m256i {
-        unsafe {
-            _mm256_blendv_epi8(b, a, m)
-        }
+        unsafe { _mm256_blendv_epi8(b, a, m) }
     }
     #[inline(always)]
     unsafe fn add(a: __m256, b: __m256) -> __m256 {
-        unsafe {
-            _mm256_add_ps(a, b)
-        }
+        unsafe { _mm256_add_ps(a, b) }
     }
     #[inline(always)]
     unsafe fn sub(a: __m256, b: __m256) -> __m256 {
-        unsafe {
-            _mm256_sub_ps(a, b)
-        }
+        unsafe { _mm256_sub_ps(a, b) }
     }
     #[inline(always)]
     unsafe fn mul(a: __m256, b: __m256) -> __m256 {
-        unsafe {
-            _mm256_mul_ps(a, b)
-        }
+        unsafe { _mm256_mul_ps(a, b) }
     }
     #[inline(always)]
     unsafe fn add_i(a: __m256i, b: __m256i) -> __m256i {
-        unsafe {
-            _mm256_add_epi32(a, b)
-        }
+        unsafe { _mm256_add_epi32(a, b) }
     }
     #[inline(always)]
     unsafe fn gather(m: __m256i, idx: __m256i, data: &[f32]) -> __m256 {
@@ -309,4 +261,3 @@ unsafe impl Lanes for Avx2 {
         }
     }
 }
-

@@ -116,3 +116,25 @@ pub(crate) fn integrate<R: Real>(grid: &Grid<R>, o: [f64; 3], d: [f64; 3], t_in:
     }
     acc
 }
+
+/// Voxels crossed by `o + t d` between the box entry `t_in` and exit `t_out`: 1 + the voxel
+/// boundary planes between the entry and exit voxels (the benchmark's step count; the walk may
+/// differ by a step where the exit lies on a boundary).
+pub(crate) fn voxels_crossed<R: Real>(
+    grid: &Grid<R>,
+    o: [f64; 3],
+    d: [f64; 3],
+    t_in: f64,
+    t_out: f64,
+) -> u64 {
+    let voxel = |t: f64, a: usize| {
+        let c = (o[a] + t * d[a] - grid.lo[a]) / grid.s[a];
+        (c.max(0.0) as i64).min(grid.n[a] as i64 - 1)
+    };
+    let t_mid = 0.5 * (t_in + t_out);
+    // Entry and exit voxels, nudged inside the chord so a point on a face counts once.
+    let (ta, tb) = (t_in + 1e-9 * (t_mid - t_in), t_out - 1e-9 * (t_out - t_mid));
+    1 + (0..3)
+        .map(|a| (voxel(tb, a) - voxel(ta, a)).unsigned_abs())
+        .sum::<u64>()
+}
