@@ -257,7 +257,7 @@ fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
             .join(", ")
     );
     println!(
-        "{:>9} {:>5} {:>5} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>10} {:>10} {:>8} {:>9}",
+        "{:>9} {:>5} {:>5} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11} {:>11} {:>8} {:>9}",
         "method",
         "view",
         "size",
@@ -267,8 +267,8 @@ fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
         "cpu s",
         "cpu/thr s",
         "x scalar",
-        "rays/s",
-        "steps/s",
+        "rays/cpu s",
+        "steps/cpu s",
         "peak/vol",
         "of target"
     );
@@ -282,7 +282,7 @@ fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
                     // The target is per 256^2 view: scale by the pixel count.
                     let target = TARGET_S * (size * size) as f64 / (256.0 * 256.0);
                     let line = format!(
-                        "{:>9} {:>5} {:>5} {:>7} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.2} {:>10.3e} {:>10.3e} {:>8} {:>8.0}%",
+                        "{:>9} {:>5} {:>5} {:>7} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.2} {:>11.3e} {:>11.3e} {:>8} {:>8.0}%",
                         format!("{method:?}").to_lowercase(),
                         view,
                         size,
@@ -292,8 +292,8 @@ fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
                         p.extra_cpu,
                         p.extra_cpu / threads,
                         base_cpu / p.extra_cpu,
-                        t.rays as f64 / p.extra_wall,
-                        t.steps as f64 / p.extra_wall,
+                        t.rays as f64 / p.extra_cpu,
+                        t.steps as f64 / p.extra_cpu,
                         t.peak_rss
                             .map_or("-".to_string(), |b| format!("{:.2}", b as f64 / vol_bytes)),
                         100.0 * target / (p.extra_cpu / threads)
@@ -307,7 +307,8 @@ fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
         "first = projector checks + one view (wall); extra = median extra view (wall), cpu = its \
          process CPU time (all threads), cpu/thr = cpu over the threads (the wall time of a machine \
          with nothing else running); x scalar = the scalar path's cpu over this path's (same \
-         run); steps = voxels crossed (siddon) or samples (trilinear); peak/vol = the process's \
+         run); rays/cpu s and steps/cpu s = rays and steps per second of process CPU time (per busy \
+         core); steps = voxels crossed (siddon) or samples (trilinear); peak/vol = the process's \
          peak resident memory during the first projection over the volume's f32 size; of target \
          = {TARGET_S} s per 256^2 view (scaled by pixels) over cpu/thr"
     );
