@@ -1,8 +1,8 @@
 //! Vector lanes of the DRR kernels: one ray per lane, f32 values, i32 voxel indices.
 //!
-//! The kernels ([`super::siddon_lanes`], [`super::trilinear_lanes`]) are written once against
-//! [`Lanes`] and compiled for AVX-512 (16 lanes) and AVX2 (8 lanes); the scalar path runs the
-//! per-ray loops of [`super::siddon`] and [`super::trilinear`]. Every lane performs the IEEE
+//! The kernel ([`super::siddon_lanes`]) is written once against [`Lanes`] and compiled for
+//! AVX-512 (16 lanes) and AVX2 (8 lanes); the scalar path runs the per-ray loop of
+//! [`super::siddon`]. Every lane performs the IEEE
 //! operations of the per-ray loop in the same order (no fused multiply-add anywhere), so every
 //! path gives the same bits (`tests/drr_simd.rs` compares them).
 
@@ -23,8 +23,6 @@ pub(crate) unsafe trait Lanes {
     unsafe fn load_i(p: &[i32]) -> Self::I;
     unsafe fn store_f(v: Self::F, p: &mut [f32]);
     unsafe fn store_i(v: Self::I, p: &mut [i32]);
-    #[allow(dead_code)]
-    unsafe fn splat_f(x: f32) -> Self::F;
     unsafe fn splat_i(x: i32) -> Self::I;
     /// Mask of the lanes whose bit is set in `bits` (bit k = lane k).
     unsafe fn mask_from_bits(bits: u32) -> Self::M;
@@ -88,10 +86,6 @@ unsafe impl Lanes for Avx512 {
             debug_assert!(p.len() >= 16);
             _mm512_storeu_si512(p.as_mut_ptr().cast(), v)
         }
-    }
-    #[inline(always)]
-    unsafe fn splat_f(x: f32) -> __m512 {
-        unsafe { _mm512_set1_ps(x) }
     }
     #[inline(always)]
     unsafe fn splat_i(x: i32) -> __m512i {
@@ -188,10 +182,6 @@ unsafe impl Lanes for Avx2 {
             debug_assert!(p.len() >= 8);
             _mm256_storeu_si256(p.as_mut_ptr().cast(), v)
         }
-    }
-    #[inline(always)]
-    unsafe fn splat_f(x: f32) -> __m256 {
-        unsafe { _mm256_set1_ps(x) }
     }
     #[inline(always)]
     unsafe fn splat_i(x: i32) -> __m256i {
