@@ -21,8 +21,15 @@
 //! - `train`: where one training iteration of the `unispine` preset goes
 //!   ([`crate::audit::train_bench`]): ms and % of the step per stage at each detector size,
 //!   CPU time, and the share outside the rasterizer against the 25 % target.
+//!
+//! - `drr`: the DRR projectors ([`crate::drr::bench`]): per projector, view (AP, lateral) and
+//!   detector size, the first and the median extra view on each instruction set, the per-ray
+//!   loops (`scalar`, the implementation before the vector kernels) measured in the same run as
+//!   the reference of the speed-ups; rays/s, voxel steps or samples per second, peak resident
+//!   memory against the volume's size, and the target (0.05 s per 256^2 view on 2 cores) with
+//!   the fraction reached.
 
-use anyhow::bail;
+use anyhow::{bail, Context};
 
 use std::time::Instant;
 
@@ -41,8 +48,9 @@ pub struct BenchArgs {
     /// Gaussian counts (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "10000,50000,100000")]
     pub gaussians: Vec<usize>,
-    /// Square detector sizes in pixels (comma-separated; `render`: default 256,512, `train`:
-    /// 256,1024).
+    /// Square detector sizes in pixels (comma-separated; default `render` 256,512, `train`
+    /// 256,1024, `drr` 256).
+
     #[arg(long, value_delimiter = ',')]
     pub sizes: Vec<usize>,
     /// Repetitions per case (the median is reported).
@@ -68,9 +76,11 @@ pub struct BenchArgs {
     /// or the built-in phantom when those files are absent.
     #[arg(long)]
     pub data: Option<std::path::PathBuf>,
-    /// `train`: the CT volume of the default dataset.
-    #[arg(long, default_value = "data/cxr.nii.gz")]
-    pub volume: std::path::PathBuf,
+    /// `train`: the CT volume of the default dataset (default `data/cxr.nii.gz`). `drr`: the
+    /// volume to project (NIfTI, MetaImage or .npy; default `data/cxr.nii.gz` when present, else
+    /// the built-in phantom of `--phantom` voxels per side).
+    #[arg(long)]
+    pub volume: Option<std::path::PathBuf>,
     /// `train`: its label volume (vertebrae 25-50 are kept, plus 10 mm).
     #[arg(long, default_value = "data/mask.nii.gz")]
     pub mask: std::path::PathBuf,
@@ -85,6 +95,10 @@ pub struct BenchArgs {
     /// training a warm-up.
     #[arg(long)]
     pub model: Option<std::path::PathBuf>,
+    /// `drr`: voxels per side of the built-in phantom used when there is no volume (1.0 mm
+    /// voxels), in [2, 1024].
+    #[arg(long, default_value_t = 256)]
+    pub phantom: usize,
 }
 
 /// Run `unispine bench`.
@@ -93,7 +107,8 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         "render" => run_render(&args),
         "field" => super::bench_field::run(&args),
         "train" => super::bench_train::run(&args),
-        k => bail!("unknown benchmark kind `{k}` (available: render, field, train)"),
+        "drr" => run_drr(&args),
+        k => bail!("unknown benchmark kind `{k}` (available: render, field, train, drr)"),
     }
 }
 
@@ -234,4 +249,134 @@ fn print_phases(t: &RenderTiming) {
             100.0 * t.blends as f64 / w.lanes as f64
         );
     }
+}
+
+fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
+    use crate::drr::bench::{time_case, BENCH_REPS, BENCH_SIZES, TARGET_S};
+    use crate::drr::Method;
+    use crate::simd::Simd;
+    let check = |flag: &str, v: usize, (lo, hi): (usize, usize)| {
+        if v < lo || v > hi {
+            bail!("{flag}: {v} is outside the allowed range [{lo}, {hi}]");
+        }
+        Ok(())
+    };
+    // Default: the target's size.
+    let sizes = if args.sizes.is_empty() {
+        vec![256]
+    } else {
+        args.sizes.clone()
+    };
+    for &s in &sizes {
+        check("--sizes", s, BENCH_SIZES)?;
+    }
+    check("--reps", args.reps, BENCH_REPS)?;
+    check("--phantom", args.phantom, (2, 1024))?;
+    if let Err(e) = Simd::from_env() {
+        bail!("{e}");
+    }
+    let default_ct = std::path::Path::new("data/cxr.nii.gz");
+    let path = match &args.volume {
+        Some(p) => Some(p.clone()),
+        None => default_ct.exists().then(|| default_ct.to_path_buf()),
+    };
+    let vol = match &path {
+        Some(p) => {
+            crate::volume::load(p).with_context(|| format!("reading --volume {}", p.display()))?
+        }
+        None => {
+            let n = args.phantom;
+            let spec = crate::volume::phantom::PhantomSpec {
+                dims: [n, n, n],
+                ..Default::default()
+            };
+            crate::volume::phantom::generate(&spec)?.0
+        }
+    };
+    let vol_bytes = (vol.len() * 4) as f64;
+    println!(
+        "DRR benchmark: {} ({:?} voxels of {:?} mm, f32 {:.0} MiB), cone beam DSD 1500 mm, DSO \
+         1000 mm, square detector as wide as the volume's shadow, {} threads, median of {} \
+         extra views",
+        path.as_ref()
+            .map_or("built-in phantom".to_string(), |p| p.display().to_string()),
+        vol.dims,
+        vol.spacing,
+        vol_bytes / (1024.0 * 1024.0),
+        rayon::current_num_threads(),
+        args.reps
+    );
+    let active = Simd::active();
+    let mut paths = vec![Simd::Scalar];
+    paths.extend(
+        Simd::supported_paths()
+            .into_iter()
+            .filter(|&p| p != Simd::Scalar && p <= active),
+    );
+    println!(
+        "paths: {} (scalar = the per-ray loops, the reference of the ratios; cap with \
+         UNISPINE_SIMD); every path's image is checked bit-identical to the scalar one",
+        paths
+            .iter()
+            .map(|p| p.name())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    println!(
+        "{:>9} {:>5} {:>5} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11} {:>11} {:>8} {:>9}",
+        "method",
+        "view",
+        "size",
+        "path",
+        "first s",
+        "extra s",
+        "cpu s",
+        "cpu/thr s",
+        "x scalar",
+        "rays/cpu s",
+        "steps/cpu s",
+        "peak/vol",
+        "of target"
+    );
+    for &size in &sizes {
+        for method in [Method::Siddon, Method::Trilinear] {
+            for (view, deg) in [("AP", 90.0), ("lat", 0.0)] {
+                let t = time_case(&vol, method, deg, size, args.reps, &paths)?;
+                let base_cpu = t.paths[0].extra_cpu;
+                let threads = rayon::current_num_threads() as f64;
+                for p in &t.paths {
+                    // The target is per 256^2 view: scale by the pixel count.
+                    let target = TARGET_S * (size * size) as f64 / (256.0 * 256.0);
+                    let line = format!(
+                        "{:>9} {:>5} {:>5} {:>7} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.2} {:>11.3e} {:>11.3e} {:>8} {:>8.0}%",
+                        format!("{method:?}").to_lowercase(),
+                        view,
+                        size,
+                        p.simd.name(),
+                        p.first_wall,
+                        p.extra_wall,
+                        p.extra_cpu,
+                        p.extra_cpu / threads,
+                        base_cpu / p.extra_cpu,
+                        t.rays as f64 / p.extra_cpu,
+                        t.steps as f64 / p.extra_cpu,
+                        t.peak_rss
+                            .map_or("-".to_string(), |b| format!("{:.2}", b as f64 / vol_bytes)),
+                        100.0 * target / (p.extra_cpu / threads)
+                    );
+                    println!("{line}");
+                }
+            }
+        }
+    }
+    println!(
+        "first = projector checks + one view (wall); extra = median extra view (wall), cpu = its \
+         process CPU time (all threads), cpu/thr = cpu over the threads (the wall time of a machine \
+         with nothing else running); x scalar = the scalar path's cpu over this path's (same \
+         run); rays/cpu s and steps/cpu s = rays and steps per second of process CPU time (per busy \
+         core); steps = voxels crossed (siddon) or samples (trilinear); peak/vol = the process's \
+         peak resident memory during the first projection over the volume's f32 size; of target \
+         = {TARGET_S} s per 256^2 view (scaled by pixels) over cpu/thr"
+    );
+    Ok(())
 }

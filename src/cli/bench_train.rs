@@ -15,6 +15,10 @@ type MakeDataset = Box<dyn FnOnce() -> anyhow::Result<Dataset>>;
 
 pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     let iters = args.iters.unwrap_or(30);
+    let volume = args
+        .volume
+        .clone()
+        .unwrap_or_else(|| std::path::PathBuf::from("data/cxr.nii.gz"));
     let sizes = if args.sizes.is_empty() {
         SIZES.to_vec()
     } else {
@@ -73,12 +77,12 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
             vec![(n[0], Box::new(move || Ok(ds)))]
         }
         None => {
-            let ct = args.volume.is_file() && args.mask.is_file();
+            let ct = volume.is_file() && args.mask.is_file();
             if ct {
                 println!(
                     "dataset: CT crop of {} with {} (vertebrae 25-50 + 10 mm, 128^3 at most, \
                      naf-mu, min-max), {} training views, 1 test view",
-                    args.volume.display(),
+                    volume.display(),
                     args.mask.display(),
                     args.views
                 );
@@ -87,14 +91,14 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
                     "dataset: built-in phantom (128^3 voxels of 1 mm), {} training views: {} or \
                      {} not found (bash scripts/fetch-example-ct.sh fetches the CT)",
                     args.views,
-                    args.volume.display(),
+                    volume.display(),
                     args.mask.display()
                 );
             }
             sizes
                 .iter()
                 .map(|&s| {
-                    let (vol, mask, views) = (args.volume.clone(), args.mask.clone(), args.views);
+                    let (vol, mask, views) = (volume.clone(), args.mask.clone(), args.views);
                     let f: MakeDataset = Box::new(move || {
                         Ok(if ct {
                             train_bench::ct_crop_dataset(&vol, &mask, s, views)?

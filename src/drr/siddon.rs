@@ -24,9 +24,21 @@ pub(crate) fn pixel<R: Real>(grid: &Grid<R>, cam: &Camera, col: usize, row: usiz
     }
 }
 
-/// The line integral along `o + t d` from the box entry `t_in` to the box exit.
+/// The start of the walk along `o + t d` from the box entry `t_in`: per axis the distance to the
+/// next boundary crossing (from the entry point) and between crossings, the crossings left
+/// before the ray leaves the box along the axis (`i64::MAX` for an axis the ray is parallel
+/// to), the index step, and the entry voxel's index.
+pub(crate) struct Walk<R> {
+    pub tm: [R; 3],
+    pub dt: [R; 3],
+    pub left: [i64; 3],
+    pub step: [isize; 3],
+    pub idx: isize,
+}
+
+/// The [`Walk`] of `o + t d` from the box entry `t_in` (f64 set-up, rounded to `R` once).
 #[inline]
-pub(crate) fn integrate<R: Real>(grid: &Grid<R>, o: [f64; 3], d: [f64; 3], t_in: f64) -> R {
+pub(crate) fn start<R: Real>(grid: &Grid<R>, o: [f64; 3], d: [f64; 3], t_in: f64) -> Walk<R> {
     let n = grid.n;
     let stride = [1isize, n[0] as isize, (n[0] * n[1]) as isize];
     let mut tm = [R::infinity(); 3]; // next boundary crossing per axis, from the entry point
@@ -58,6 +70,25 @@ pub(crate) fn integrate<R: Real>(grid: &Grid<R>, o: [f64; 3], d: [f64; 3], t_in:
             step[a] = -stride[a];
         }
     }
+    Walk {
+        tm,
+        dt,
+        left,
+        step,
+        idx,
+    }
+}
+
+/// The line integral along `o + t d` from the box entry `t_in` to the box exit.
+#[inline]
+pub(crate) fn integrate<R: Real>(grid: &Grid<R>, o: [f64; 3], d: [f64; 3], t_in: f64) -> R {
+    let Walk {
+        mut tm,
+        dt,
+        mut left,
+        step,
+        mut idx,
+    } = start(grid, o, d, t_in);
     let data = grid.data;
     let mut t = R::zero();
     let mut acc = R::zero();
@@ -84,4 +115,26 @@ pub(crate) fn integrate<R: Real>(grid: &Grid<R>, o: [f64; 3], d: [f64; 3], t_in:
         idx += step[a];
     }
     acc
+}
+
+/// Voxels crossed by `o + t d` between the box entry `t_in` and exit `t_out`: 1 + the voxel
+/// boundary planes between the entry and exit voxels (the benchmark's step count; the walk may
+/// differ by a step where the exit lies on a boundary).
+pub(crate) fn voxels_crossed<R: Real>(
+    grid: &Grid<R>,
+    o: [f64; 3],
+    d: [f64; 3],
+    t_in: f64,
+    t_out: f64,
+) -> u64 {
+    let voxel = |t: f64, a: usize| {
+        let c = (o[a] + t * d[a] - grid.lo[a]) / grid.s[a];
+        (c.max(0.0) as i64).min(grid.n[a] as i64 - 1)
+    };
+    let t_mid = 0.5 * (t_in + t_out);
+    // Entry and exit voxels, nudged inside the chord so a point on a face counts once.
+    let (ta, tb) = (t_in + 1e-9 * (t_mid - t_in), t_out - 1e-9 * (t_out - t_mid));
+    1 + (0..3)
+        .map(|a| (voxel(tb, a) - voxel(ta, a)).unsigned_abs())
+        .sum::<u64>()
 }

@@ -36,6 +36,20 @@ pub(crate) fn pixel<R: Real>(
     col: usize,
     row: usize,
 ) -> (R, bool) {
+    let (o, d, h, hit) = ray(grid, setup, cam, col, row);
+    (integrate(grid, setup, cam, o, d, h), hit)
+}
+
+/// The ray through pixel (`col`, `row`): origin, direction, step, and whether it meets the
+/// volume box.
+#[inline]
+pub(crate) fn ray<R: Real>(
+    grid: &Grid<R>,
+    setup: &Setup,
+    cam: &Camera,
+    col: usize,
+    row: usize,
+) -> ([f64; 3], [f64; 3], f64, bool) {
     let (o, d) = cam.pixel_ray(col as f64, row as f64);
     let hit = clip_ray(cam, o, d, grid.lo, grid.hi).is_some();
     // Source (or source plane) to pixel distance along the ray.
@@ -47,7 +61,16 @@ pub(crate) fn pixel<R: Real>(
         Mode::Parallel => cam.dsd,
     };
     let h = len / (len / setup.h0).ceil();
-    (integrate(grid, setup, cam, o, d, h), hit)
+    (o, d, h, hit)
+}
+
+/// Samples of the ray-march of `o + t d` with step `h` (those where the zero-padded
+/// interpolant can be non-zero; the benchmark's count).
+pub(crate) fn sample_count(setup: &Setup, cam: &Camera, o: [f64; 3], d: [f64; 3], h: f64) -> u64 {
+    match clip_ray(cam, o, d, setup.outer.0, setup.outer.1) {
+        Some((ta, tb)) => ((tb / h).floor() as i64 - (ta / h).ceil() as i64 + 1).max(0) as u64,
+        None => 0,
+    }
 }
 
 /// Per-volume constants.
