@@ -42,15 +42,15 @@ use crate::render::composite;
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
     /// What to benchmark: `render` (rasterizer forward and forward + backward), `field`
-    /// (neural-field baselines: MLP products, per-iteration stages, memory) or `train` (one
-    /// training iteration of the `unispine` preset split into stages).
+    /// (neural-field baselines: MLP products, per-iteration stages, memory), `train` (one
+    /// training iteration of the `unispine` preset split into stages) or `drr` (the DRR
+    /// projectors per view and SIMD path).
     pub kind: String,
     /// Gaussian counts (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "10000,50000,100000")]
     pub gaussians: Vec<usize>,
     /// Square detector sizes in pixels (comma-separated; default `render` 256,512, `train`
     /// 256,1024, `drr` 256).
-
     #[arg(long, value_delimiter = ',')]
     pub sizes: Vec<usize>,
     /// Repetitions per case (the median is reported).
@@ -64,7 +64,7 @@ pub struct BenchArgs {
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "naf,intratomo,nerf,naf-full,intratomo-full,nerf-full"
+        default_value = "naf,intratomo,tensorf,nerf,naf-full,intratomo-full,tensorf-full,nerf-full"
     )]
     pub presets: Vec<String>,
     /// Timed iterations (`field`: per reduced preset, full presets 1; default 5. `train`:
