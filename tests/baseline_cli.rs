@@ -25,27 +25,38 @@ fn ok(args: &[&str], cwd: &Path) -> String {
     String::from_utf8_lossy(&o.stdout).to_string()
 }
 
-#[test]
-fn fdk_run_folder_is_a_report_row() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
+/// `unispine data phantom` into `d/ph`: `size`^3 voxels, a `detector`^2 detector, the given views.
+fn phantom(d: &Path, size: u32, detector: u32, train: u32, test: u32) {
+    let (size, detector, train, test) = (
+        size.to_string(),
+        detector.to_string(),
+        train.to_string(),
+        test.to_string(),
+    );
     ok(
         &[
             "data",
             "phantom",
             "--size",
-            "32",
+            &size,
             "--detector",
-            "64",
+            &detector,
             "--train-views",
-            "24",
+            &train,
             "--test-views",
-            "6",
+            &test,
             "--out",
             "ph",
         ],
         d,
     );
+}
+
+#[test]
+fn fdk_run_folder_is_a_report_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    phantom(d, 32, 64, 24, 6);
     let out = ok(
         &["train", "--data", "ph", "--method", "fdk", "--out", "fdk"],
         d,
@@ -86,23 +97,7 @@ fn bad_method_settings_are_named() {
         e.contains("unknown method `fbp`") && e.contains("fdk"),
         "{e}"
     );
-    ok(
-        &[
-            "data",
-            "phantom",
-            "--size",
-            "32",
-            "--detector",
-            "16",
-            "--train-views",
-            "2",
-            "--test-views",
-            "1",
-            "--out",
-            "ph",
-        ],
-        d,
-    );
+    phantom(d, 32, 16, 2, 1);
     let o = unispine(
         &[
             "train", "--data", "ph", "--method", "fdk", "--iters", "5", "--out", "x",
@@ -137,23 +132,7 @@ fn bad_method_settings_are_named() {
 fn a_field_run_follows_its_seed() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    ok(
-        &[
-            "data",
-            "phantom",
-            "--size",
-            "32",
-            "--detector",
-            "8",
-            "--train-views",
-            "3",
-            "--test-views",
-            "1",
-            "--out",
-            "ph",
-        ],
-        d,
-    );
+    phantom(d, 32, 8, 3, 1);
     let model = |seed: &str, out: &str| {
         ok(
             &[
@@ -192,23 +171,7 @@ fn a_signal_stops_a_field_run_with_its_model_and_metrics() {
     use std::io::BufRead;
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    ok(
-        &[
-            "data",
-            "phantom",
-            "--size",
-            "32",
-            "--detector",
-            "16",
-            "--train-views",
-            "4",
-            "--test-views",
-            "2",
-            "--out",
-            "ph",
-        ],
-        d,
-    );
+    phantom(d, 32, 16, 4, 2);
     for (sig, code, name) in [(libc::SIGTERM, 143, "term"), (libc::SIGINT, 130, "int")] {
         let mut child = Command::new(env!("CARGO_BIN_EXE_unispine"))
             .args([
@@ -269,23 +232,7 @@ fn a_signal_stops_a_field_run_with_its_model_and_metrics() {
 fn tensorf_trains_and_saves_a_numpy_readable_model() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    ok(
-        &[
-            "data",
-            "phantom",
-            "--size",
-            "32",
-            "--detector",
-            "8",
-            "--train-views",
-            "2",
-            "--test-views",
-            "1",
-            "--out",
-            "ph",
-        ],
-        d,
-    );
+    phantom(d, 32, 8, 2, 1);
     for (lines, out) in [(None, "tf"), (Some("corrected"), "tfc")] {
         let mut args = vec![
             "train", "--data", "ph", "--method", "tensorf", "--iters", "2", "--out", out,
