@@ -441,13 +441,18 @@ pub fn tables_md(
         .iter()
         .any(|m| matches!(base_of(m), Some(crate::baseline::Baseline::Field(_))))
     {
+        let fdk = plan
+            .methods
+            .iter()
+            .any(|m| base_of(m) == Some(crate::baseline::Baseline::Fdk));
         let _ = writeln!(
             s,
-            "\nEvery neural-field cell: {}; FDK is one pass.",
+            "\nEvery neural-field cell: {}{}.",
             match plan.field_iters {
                 Some(n) => format!("`unispine train --iters {n}`"),
                 None => "the preset's own schedule".into(),
-            }
+            },
+            if fdk { "; FDK is one pass" } else { "" }
         );
     }
     s.push('\n');
