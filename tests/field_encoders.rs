@@ -15,6 +15,7 @@ use unispine::field::encode::{DenseGrid, Encoder, GridMap, HashGrid, TensorVm, V
 use unispine::field::mlp::OutAct;
 use unispine::field::train::loss_and_grad;
 use unispine::field::{EncoderConfig, Field, FieldConfig};
+use unispine::simd::Simd;
 
 #[test]
 fn field_gradcheck_rows_pass() {
@@ -147,7 +148,7 @@ fn collision_free_hash_levels_equal_dense_grids() {
     let hash = Encoder::HashGrid(h.clone());
     let out = encode_all(&hash, &table, &pts);
     let mut gh = vec![0.0; h.n_params()];
-    hash.backward(&table, &pts, &g, h.out_dim(), 0, &mut gh);
+    hash.backward(Simd::active(), &table, &pts, &g, h.out_dim(), 0, &mut gh);
     for l in 0..3 {
         let d = DenseGrid {
             resolution: (2 << l) + 1,
@@ -165,7 +166,15 @@ fn collision_free_hash_levels_equal_dense_grids() {
             .collect();
         assert_eq!(bits(&od), bits(&level), "level {l}");
         let mut gd = vec![0.0; r.len()];
-        dense.backward(&table[r.clone()], &pts, &g, 6, 2 * l, &mut gd);
+        dense.backward(
+            Simd::active(),
+            &table[r.clone()],
+            &pts,
+            &g,
+            6,
+            2 * l,
+            &mut gd,
+        );
         assert_eq!(bits(&gd), bits(&gh[r]), "level {l} gradient");
     }
 }
@@ -214,8 +223,8 @@ fn hashed_level_with_distinct_slots_equals_dense_grid() {
     );
     let g = rand_vec(pts.len() * 2, 7);
     let (mut gh, mut gd) = (vec![0.0; h.n_params()], vec![0.0; d.n_params()]);
-    hash.backward(&table, &pts, &g, 2, 0, &mut gh);
-    dense.backward(&dense_table, &pts, &g, 2, 0, &mut gd);
+    hash.backward(Simd::active(), &table, &pts, &g, 2, 0, &mut gh);
+    dense.backward(Simd::active(), &dense_table, &pts, &g, 2, 0, &mut gd);
     for (&s, &v) in &used {
         assert_eq!(bits(&gh[2 * s..2 * s + 2]), bits(&gd[2 * v..2 * v + 2]));
     }
@@ -328,14 +337,14 @@ fn upstream_vm_line_factor_is_the_plane_column_at_zero() {
     let pts = fc::points(10, 12);
     let g = rand_vec(30, 13);
     let mut gr = vec![0.0; vm.n_params()];
-    e.backward(&p, &pts, &g, 3, 0, &mut gr);
+    e.backward(Simd::active(), &p, &pts, &g, 3, 0, &mut gr);
     assert!(gr[loff..boff].iter().all(|v| *v == 0.0));
     assert!(gr[..loff].iter().filter(|v| **v != 0.0).count() > 20);
     // The corrected mode reads the lines (and gives them a gradient).
     let mut vc = vm.clone();
     vc.lines = VmLines::Corrected;
     let mut gc = vec![0.0; vc.n_params()];
-    Encoder::TensorVm(vc).backward(&p, &pts, &g, 3, 0, &mut gc);
+    Encoder::TensorVm(vc).backward(Simd::active(), &p, &pts, &g, 3, 0, &mut gc);
     assert!(gc[loff..boff].iter().filter(|v| **v != 0.0).count() > 5);
 }
 
@@ -392,7 +401,7 @@ fn encoders_are_bit_identical_for_1_2_8_threads() {
             let mut ge = vec![0.0f32; ne];
             pool.install(|| {
                 f.encoder
-                    .backward(&f.params[..ne], &pts, &g, od, 0, &mut ge)
+                    .backward(Simd::active(), &f.params[..ne], &pts, &g, od, 0, &mut ge)
             });
             let enc = f.encode(&pts);
             out.push((

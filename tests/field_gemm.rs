@@ -282,12 +282,29 @@ fn train_bits(cfg: &FieldConfig, simd: Simd, iters: usize) -> Vec<u32> {
 
 #[test]
 fn training_iterations_are_bit_identical_for_threads_and_simd_paths() {
-    for cfg in [naf_like(), {
-        let mut c = FieldConfig::preset("intratomo", 4).unwrap();
-        c.hidden_dim = 40; // ragged against every tile width
-        c.n_samples = 16;
-        c
-    }] {
+    for cfg in [
+        naf_like(),
+        {
+            let mut c = FieldConfig::preset("intratomo", 4).unwrap();
+            c.hidden_dim = 40; // ragged against every tile width
+            c.n_samples = 16;
+            c
+        },
+        {
+            // TensoRF: the basis and its gradients run the blocked products (out_dim 20 and
+            // 3 x 5 features: ragged against every tile width).
+            let mut c = FieldConfig::preset("tensorf", 4).unwrap();
+            c.encoder = unispine::field::EncoderConfig::TensorVm {
+                resolution: 12,
+                components: 5,
+                out_dim: 20,
+                lines: unispine::field::encode::VmLines::Corrected,
+            };
+            c.hidden_dim = 24;
+            c.n_samples = 16;
+            c
+        },
+    ] {
         let mut runs = Vec::new();
         for threads in [1, 2, 8] {
             let pool = rayon::ThreadPoolBuilder::new()

@@ -21,6 +21,7 @@ use unispine::audit::field as fc;
 use unispine::field::encode::{
     DenseGrid, Encoder, Frequency, GridMap, HashGrid, TensorVm, VmLines,
 };
+use unispine::simd::Simd;
 
 const TOL: [f64; 2] = [1e-12, 1e-10];
 
@@ -197,7 +198,7 @@ fn compute(e: &Encoder, inputs: &Value) -> Value {
         e.encode(&p, *x, o);
     }
     let mut gp = vec![0.0; e.n_params()];
-    e.backward(&p, &pts, &g, od, 0, &mut gp);
+    e.backward(Simd::active(), &p, &pts, &g, od, 0, &mut gp);
     let gx: Vec<f64> = pts
         .iter()
         .enumerate()

@@ -26,6 +26,7 @@ use crate::field::render::{self, Ray};
 use crate::field::train::loss_and_grad;
 use crate::field::{EncoderConfig, Field, FieldConfig};
 use crate::math::fd;
+use crate::simd::Simd;
 
 /// Half side of the test cube (metres), as the presets.
 pub const BOUND: f64 = 0.3;
@@ -209,7 +210,7 @@ pub fn encoder_rows() -> Vec<Row> {
         let pts = points(7, 200 + ci as u64);
         let g = uniform(pts.len() * e.out_dim(), -1.0, 1.0, 300 + ci as u64);
         let mut an = vec![0.0; e.n_params()];
-        e.backward(&p, &pts, &g, e.out_dim(), 0, &mut an);
+        e.backward(Simd::active(), &p, &pts, &g, e.out_dim(), 0, &mut an);
         for (name, r) in groups(&e) {
             let num = fd::central_diff5(
                 |v| {

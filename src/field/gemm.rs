@@ -522,6 +522,53 @@ pub fn grad_weight<R: Real>(
     }
 }
 
+/// `c[i][j] += sum_t A(i, t) b[t][j]` (t in order, from the current `c`), with
+/// `A(i, t) = a[i * row_stride + t * col_stride]` (`m x kk`), `b`: `kk x nn` with row stride
+/// `ldb`, `c`: `m x nn` with row stride `ldc`. The general form of the three products above
+/// (the TensoRF basis and its gradients use it on strided gradient rows).
+#[allow(clippy::too_many_arguments)]
+pub fn accumulate<R: Real>(
+    simd: Simd,
+    a: &[R],
+    row_stride: usize,
+    col_stride: usize,
+    b: &[R],
+    ldb: usize,
+    c: &mut [R],
+    ldc: usize,
+    m: usize,
+    nn: usize,
+    kk: usize,
+) {
+    if let (Some(a), Some(b)) = (as_f32(a), as_f32(b)) {
+        let c = as_f32_mut(c).expect("same type as a");
+        let o = Operands {
+            a,
+            al: ALayout {
+                row_stride,
+                col_stride,
+            },
+            b,
+            ldb,
+            bias: None,
+            ldc,
+            m,
+            nn,
+            kk,
+        };
+        return kernel(simd, o, c);
+    }
+    for i in 0..m {
+        let ci = &mut c[i * ldc..i * ldc + nn];
+        for t in 0..kk {
+            let av = a[i * row_stride + t * col_stride];
+            for (cv, &bv) in ci.iter_mut().zip(&b[t * ldb..t * ldb + nn]) {
+                *cv += av * bv;
+            }
+        }
+    }
+}
+
 /// Floating-point operations of one layer's forward (`2 n inp out`) or of each backward
 /// product.
 pub fn flops(n: usize, inp: usize, out: usize) -> u64 {

@@ -40,6 +40,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 use crate::real::Real;
+use crate::simd::Simd;
 use encode::{DenseGrid, Encoder, Frequency, GridMap, HashGrid, TensorVm, VmLines};
 use mlp::{Mlp, OutAct};
 
@@ -521,16 +522,16 @@ impl<R: Real> Field<R> {
     /// Encode a block of points (`n x out_dim`).
     pub fn encode(&self, pts: &[[R; 3]]) -> Vec<R> {
         let mut out = vec![R::zero(); pts.len() * self.encoder.out_dim()];
-        self.encode_into(pts, &mut out);
+        self.encode_into(Simd::active(), pts, &mut out);
         out
     }
 
     /// [`Field::encode`] into `out` (`n x out_dim`).
-    pub fn encode_into(&self, pts: &[[R; 3]], out: &mut [R]) {
+    pub fn encode_into(&self, simd: Simd, pts: &[[R; 3]], out: &mut [R]) {
         let ep = &self.params[..self.n_encoder_params()];
         let e = self.encoder.out_dim();
         self.encoder
-            .encode_block(ep, pts, &mut out[..pts.len() * e]);
+            .encode_block(simd, ep, pts, &mut out[..pts.len() * e]);
     }
 
     /// Attenuation at a block of points.

@@ -173,7 +173,7 @@ impl<R: Real> Workspace<R> {
                 }
                 let t_sample = clock.lap();
                 s.enc.resize(n * ed, R::zero());
-                field.encode_into(pts, &mut s.enc);
+                field.encode_into(simd, pts, &mut s.enc);
                 let t_encode = clock.lap();
                 field.mlp.forward_ws(simd, mp, &s.enc, n, &mut s.mlp);
                 let t_fwd = clock.lap();
@@ -217,6 +217,7 @@ impl<R: Real> Workspace<R> {
         if want_gx {
             let t0 = Instant::now();
             field.encoder.backward(
+                simd,
                 &field.params[..ne],
                 &self.pts,
                 &self.g_x,

@@ -16,6 +16,7 @@ pub use hash_grid::HashGrid;
 pub use tensor_vm::{TensorVm, VmLines};
 
 use crate::real::Real;
+use crate::simd::Simd;
 
 /// An encoder.
 #[derive(Clone, Debug, PartialEq)]
@@ -59,10 +60,12 @@ impl Encoder {
     }
 
     /// Encode a block of points (`out`: [`Encoder::out_dim`] values per point), as
-    /// [`Encoder::encode`] point by point (the hash grid runs level by level, same values).
-    pub fn encode_block<R: Real>(&self, params: &[R], xs: &[[R; 3]], out: &mut [R]) {
+    /// [`Encoder::encode`] point by point (the hash grid runs level by level, TensoRF's basis as
+    /// one matrix product; same values).
+    pub fn encode_block<R: Real>(&self, simd: Simd, params: &[R], xs: &[[R; 3]], out: &mut [R]) {
         match self {
             Encoder::HashGrid(h) => h.encode_block(params, xs, out),
+            Encoder::TensorVm(v) => v.encode_block(simd, params, xs, out),
             _ => {
                 let e = self.out_dim();
                 for (p, o) in xs.iter().zip(out.chunks_mut(e)) {
@@ -76,8 +79,10 @@ impl Encoder {
     /// `g_out[n * g_stride + g_off ..]` the gradient of point `n`'s encoding (see
     /// [`HashGrid::backward`]); nothing for encoders without parameters. Bit-identical for any
     /// thread count.
+    #[allow(clippy::too_many_arguments)]
     pub fn backward<R: Real>(
         &self,
+        simd: Simd,
         params: &[R],
         xs: &[[R; 3]],
         g_out: &[R],
@@ -88,7 +93,7 @@ impl Encoder {
         match self {
             Encoder::Frequency(_) => {}
             Encoder::HashGrid(h) => h.backward(xs, g_out, g_stride, g_off, grad),
-            Encoder::TensorVm(v) => v.backward(params, xs, g_out, g_stride, g_off, grad),
+            Encoder::TensorVm(v) => v.backward(simd, params, xs, g_out, g_stride, g_off, grad),
             Encoder::DenseGrid(d) => d.backward(xs, g_out, g_stride, g_off, grad),
         }
     }

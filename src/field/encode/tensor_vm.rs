@@ -24,13 +24,19 @@
 //!
 //! Backward (hand-written): `dB[a][k] += g_a feat_k`, `g_feat = B^T g`, then per component
 //! `dP[4 texels] += w g_feat L`, `dL[taps] += w g_feat P` (upstream mode: the line taps are
-//! texels of the same plane). Parallel over the basis rows and over the `3C` (plane,
-//! component) pairs, each owning its gradient slice and visiting the points in order: no
-//! atomics, bit-identical for any thread count.
+//! texels of the same plane). The basis products (forward `feat B^T`, `G B`, `dB += G^T F`) run
+//! the field MLP's blocked kernels ([`crate::field::gemm::accumulate`]), whose chains are the
+//! per-point loops' (from the initial value, the inner index in order, multiply then add), so
+//! every SIMD path gives the point-by-point bits. Each point's taps are computed once; the
+//! scatter is parallel over the `3C` (plane, component) pairs and the basis rows, each owning
+//! its gradient slice and visiting the points in order: no atomics, bit-identical for any
+//! thread count.
 
 use rayon::prelude::*;
 
+use crate::field::gemm;
 use crate::real::Real;
+use crate::simd::Simd;
 
 /// Axis pairs of the planes (`matMode`).
 pub const MAT: [[usize; 2]; 3] = [[0, 1], [0, 2], [1, 2]];
@@ -115,6 +121,27 @@ fn dot<R: Real>(taps: &Taps<R>, v: &[R]) -> R {
     acc
 }
 
+/// One point's taps on one plane and its line, indices narrowed to `u32` (a plane holds at
+/// most [`crate::field::MAX_GRID_PARAMS`] values).
+#[derive(Clone, Copy, Default)]
+struct PlaneTaps<R> {
+    plane: [u32; 4],
+    plane_w: [R; 4],
+    line: [u32; 4],
+    line_w: [R; 4],
+}
+
+impl<R: Real> PlaneTaps<R> {
+    fn new(plane: &Taps<R>, line: &Taps<R>) -> Self {
+        PlaneTaps {
+            plane: plane.map(|(i, _)| i as u32),
+            plane_w: plane.map(|(_, w)| w),
+            line: line.map(|(i, _)| i as u32),
+            line_w: line.map(|(_, w)| w),
+        }
+    }
+}
+
 impl TensorVm {
     /// Output width.
     pub fn out_dim(&self) -> usize {
@@ -193,6 +220,24 @@ impl TensorVm {
         }
     }
 
+    /// Encode a block of points (`out_dim` values each), as [`TensorVm::encode`] point by
+    /// point: the features of every point first, then one product with the basis (the same
+    /// chain per output: from zero, `k` in order).
+    pub fn encode_block<R: Real>(&self, simd: Simd, params: &[R], xs: &[[R; 3]], out: &mut [R]) {
+        let (k3, od) = (3 * self.components, self.out_dim);
+        let mut feat = vec![R::zero(); xs.len() * k3];
+        let mut lf = vec![R::zero(); k3];
+        for (&x, f) in xs.iter().zip(feat.chunks_exact_mut(k3)) {
+            self.factors(params, &self.reads(x), f, &mut lf);
+            f.iter_mut().zip(&lf).for_each(|(a, &b)| *a *= b);
+        }
+        let mut bt = vec![R::zero(); k3 * od];
+        gemm::transpose(&params[self.offsets().1..], od, k3, &mut bt);
+        let out = &mut out[..xs.len() * od];
+        out.iter_mut().for_each(|v| *v = R::zero());
+        gemm::accumulate(simd, &feat, k3, 1, &bt, od, out, od, xs.len(), od, k3);
+    }
+
     /// `g_feat = B^T g` of one point.
     fn feature_grad<R: Real>(&self, basis: &[R], g: &[R], gf: &mut [R]) {
         let k3 = 3 * self.components;
@@ -206,8 +251,10 @@ impl TensorVm {
 
     /// Accumulate the parameter gradient of `sum g . encode(x)` over the points `xs`, with
     /// `g_out[n * g_stride + g_off ..]` the gradient of point `n`'s encoding.
+    #[allow(clippy::too_many_arguments)]
     pub fn backward<R: Real>(
         &self,
+        simd: Simd,
         params: &[R],
         xs: &[[R; 3]],
         g_out: &[R],
@@ -224,66 +271,70 @@ impl TensorVm {
         let k3 = 3 * c;
         let (loff, boff) = self.offsets();
         let basis = &params[boff..];
-        let g_of = |p: usize| &g_out[p * g_stride + g_off..][..od];
-        // Per point (independent): factors and the feature gradient.
+        // Per point (independent): factors, the feature gradient and each plane's taps.
         const CH: usize = 256;
-        let per: Vec<(Vec<R>, Vec<R>, Vec<R>)> = xs
-            .par_chunks(CH)
+        let np = xs.len();
+        let (mut pf, mut lf, mut gf) = (
+            vec![R::zero(); np * k3],
+            vec![R::zero(); np * k3],
+            vec![R::zero(); np * k3],
+        );
+        let mut taps: [Vec<PlaneTaps<R>>; 3] =
+            std::array::from_fn(|_| vec![PlaneTaps::default(); np]);
+        let [t0, t1, t2] = &mut taps;
+        xs.par_chunks(CH)
+            .zip(pf.par_chunks_mut(CH * k3))
+            .zip(lf.par_chunks_mut(CH * k3))
+            .zip(gf.par_chunks_mut(CH * k3))
+            .zip(t0.par_chunks_mut(CH))
+            .zip(t1.par_chunks_mut(CH))
+            .zip(t2.par_chunks_mut(CH))
             .enumerate()
-            .map(|(ci, chunk)| {
-                let m = chunk.len();
-                let (mut pf, mut lf, mut gf) = (
-                    vec![R::zero(); m * k3],
-                    vec![R::zero(); m * k3],
-                    vec![R::zero(); m * k3],
-                );
+            .for_each(|(ci, ((((((chunk, pf), lf), gf), t0), t1), t2))| {
                 for (j, &x) in chunk.iter().enumerate() {
                     let rd = self.reads(x);
                     let s = j * k3..(j + 1) * k3;
-                    self.factors(params, &rd, &mut pf[s.clone()], &mut lf[s.clone()]);
-                    self.feature_grad(basis, g_of(ci * CH + j), &mut gf[s]);
+                    self.factors(params, &rd, &mut pf[s.clone()], &mut lf[s]);
+                    for (i, t) in [&mut t0[j], &mut t1[j], &mut t2[j]].into_iter().enumerate() {
+                        *t = PlaneTaps::new(&rd.plane[i].0, &rd.line[i].0);
+                    }
                 }
-                (pf, lf, gf)
-            })
-            .collect();
-        let (mut pf, mut lf, mut gf) = (Vec::new(), Vec::new(), Vec::new());
-        for (a, b, g) in per {
-            pf.extend(a);
-            lf.extend(b);
-            gf.extend(g);
-        }
+                // g_feat = G B (from zero, rows of the basis in order).
+                let (m, g) = (chunk.len(), &g_out[ci * CH * g_stride + g_off..]);
+                gemm::accumulate(simd, g, g_stride, 1, basis, k3, gf, k3, m, k3, od);
+            });
         let (gp, rest) = grad.split_at_mut(loff);
         let (gl, gb) = rest.split_at_mut(boff - loff);
         // Basis rows: dB[a][k] += sum_p g_a feat_k, points in order.
+        // As the product dB += G^T F (G's rows strided in `g_out`), in two halves of the rows.
+        let feat: Vec<R> = pf.iter().zip(&lf).map(|(&a, &b)| a * b).collect();
+        let half = od.div_ceil(2).max(1);
         gb[..od * k3]
-            .par_chunks_mut(k3)
+            .par_chunks_mut(half * k3)
             .enumerate()
-            .for_each(|(a, row)| {
-                for p in 0..xs.len() {
-                    let ga = g_of(p)[a];
-                    for k in 0..k3 {
-                        row[k] += ga * (pf[p * k3 + k] * lf[p * k3 + k]);
-                    }
-                }
+            .for_each(|(h, rows)| {
+                let m = rows.len() / k3;
+                let a = &g_out[g_off + h * half..];
+                gemm::accumulate(simd, a, 1, g_stride, &feat, k3, rows, k3, m, k3, xs.len());
             });
-        // Plane / line components.
+        // Plane / line components: the taps computed once per point above.
         gp.par_chunks_mut(pl)
             .zip(gl.par_chunks_mut(n))
             .enumerate()
             .for_each(|(k, (dp, dl))| {
-                let i = k / c;
-                for (p, &x) in xs.iter().enumerate() {
+                for (p, t) in taps[k / c].iter().enumerate() {
                     let g = gf[p * k3 + k];
-                    let rd = self.reads(x);
-                    for &(t, w) in &rd.plane[i].0 {
-                        dp[t] += w * (g * lf[p * k3 + k]);
+                    let gl = g * lf[p * k3 + k];
+                    for q in 0..4 {
+                        dp[t.plane[q] as usize] += t.plane_w[q] * gl;
                     }
                     let dst: &mut [R] = match self.lines {
                         VmLines::Upstream => dp,
                         VmLines::Corrected => dl,
                     };
-                    for &(t, w) in &rd.line[i].0 {
-                        dst[t] += w * (g * pf[p * k3 + k]);
+                    let gp = g * pf[p * k3 + k];
+                    for q in 0..4 {
+                        dst[t.line[q] as usize] += t.line_w[q] * gp;
                     }
                 }
             });
@@ -349,5 +400,107 @@ impl TensorVm {
             p.push(R::c((2.0 * uniform() - 1.0) * bnd));
         }
         p
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn vm(lines: VmLines) -> TensorVm {
+        TensorVm {
+            resolution: 9,
+            components: 3,
+            out_dim: 13,
+            bound: 0.3,
+            lines,
+        }
+    }
+
+    /// 300 points (a partial chunk of the backward's 256), some outside the bound.
+    fn points() -> Vec<[f32; 3]> {
+        (0..300)
+            .map(|i| {
+                let t = i as f32 / 300.0;
+                [0.7 * t - 0.35, (9.0 * t).sin() * 0.3, 0.25 - 0.6 * t * t]
+            })
+            .collect()
+    }
+
+    fn params(v: &TensorVm) -> Vec<f32> {
+        (0..v.n_params())
+            .map(|i| ((i * 7919 % 1000) as f32 - 500.0) * 1e-3)
+            .collect()
+    }
+
+    fn bits(v: &[f32]) -> Vec<u32> {
+        v.iter().map(|x| x.to_bits()).collect()
+    }
+
+    #[test]
+    fn block_encode_is_point_encode_bit_for_bit_on_every_path() {
+        for lines in [VmLines::Upstream, VmLines::Corrected] {
+            let v = vm(lines);
+            let (p, xs) = (params(&v), points());
+            let mut want = vec![0.0f32; xs.len() * v.out_dim];
+            for (x, o) in xs.iter().zip(want.chunks_mut(v.out_dim)) {
+                v.encode(&p, *x, o);
+            }
+            for simd in Simd::supported_paths() {
+                let mut got = vec![f32::NAN; xs.len() * v.out_dim];
+                v.encode_block(simd, &p, &xs, &mut got);
+                assert_eq!(bits(&got), bits(&want), "{lines:?} {simd:?}");
+            }
+        }
+    }
+
+    /// The backward point by point in the documented order (features, `B^T g` from zero, then
+    /// the basis rows, planes and lines with the points in order), against the blocked one on
+    /// every path, starting from a non-zero gradient (the products accumulate).
+    #[test]
+    fn backward_is_the_point_by_point_order_on_every_path() {
+        for lines in [VmLines::Upstream, VmLines::Corrected] {
+            let v = vm(lines);
+            let (p, xs) = (params(&v), points());
+            let (k3, od, pl, n) = (3 * v.components, v.out_dim, v.plane_len(), v.resolution);
+            let (loff, boff) = v.offsets();
+            // Gradient rows strided 17 with offset 2 (as inside a wider input).
+            let (stride, off) = (17, 2);
+            let g: Vec<f32> = (0..xs.len() * stride)
+                .map(|i| ((i * 31 % 97) as f32 - 48.0) * 1e-2)
+                .collect();
+            let start: Vec<f32> = (0..v.n_params()).map(|i| (i % 5) as f32 * 0.25).collect();
+            let mut want = start.clone();
+            for (q, &x) in xs.iter().enumerate() {
+                let rd = v.reads(x);
+                let (mut pf, mut lf, mut gf) = (vec![0.0; k3], vec![0.0; k3], vec![0.0; k3]);
+                v.factors(&p, &rd, &mut pf, &mut lf);
+                let gq = &g[q * stride + off..][..od];
+                v.feature_grad(&p[boff..], gq, &mut gf);
+                for a in 0..od {
+                    for k in 0..k3 {
+                        want[boff + a * k3 + k] += gq[a] * (pf[k] * lf[k]);
+                    }
+                }
+                for k in 0..k3 {
+                    let i = k / v.components;
+                    for &(t, w) in &rd.plane[i].0 {
+                        want[k * pl + t] += w * (gf[k] * lf[k]);
+                    }
+                    let base = match lines {
+                        VmLines::Upstream => k * pl,
+                        VmLines::Corrected => loff + k * n,
+                    };
+                    for &(t, w) in &rd.line[i].0 {
+                        want[base + t] += w * (gf[k] * pf[k]);
+                    }
+                }
+            }
+            for simd in Simd::supported_paths() {
+                let mut got = start.clone();
+                v.backward(simd, &p, &xs, &g, stride, off, &mut got);
+                assert_eq!(bits(&got), bits(&want), "{lines:?} {simd:?}");
+            }
+        }
     }
 }
