@@ -392,6 +392,17 @@ pub struct BaselineOptions {
     pub vm_lines: Option<VmLines>,
 }
 
+/// `--vm-lines` is given only to a TensoRF preset (`method`: the method's name).
+pub fn check_vm_lines(method: &str, vm_lines: Option<VmLines>) -> Result<()> {
+    if vm_lines.is_some() && !method.starts_with("tensorf") {
+        return Err(Error::invalid(
+            "--vm-lines",
+            format!("only for the TensoRF presets (tensorf, tensorf-full), not `{method}`"),
+        ));
+    }
+    Ok(())
+}
+
 /// Run `baseline` on `ds`, writing the run folder `out` when given, with `opts`
 /// ([`BaselineOptions`]); `stop` ends a field run early (no evaluation); `on_event` receives
 /// [`Event::Progress`] after each field iteration.
@@ -404,15 +415,7 @@ pub fn run(
     on_event: &mut dyn FnMut(&Event),
 ) -> Result<Metrics> {
     let iters = opts.iters;
-    if opts.vm_lines.is_some() && !baseline.name().starts_with("tensorf") {
-        return Err(Error::invalid(
-            "--vm-lines",
-            format!(
-                "only for the TensoRF presets (tensorf, tensorf-full), not `{}`",
-                baseline.name()
-            ),
-        ));
-    }
+    check_vm_lines(baseline.name(), opts.vm_lines)?;
     let (o, write_model): (Outcome, ModelWriter) = match baseline {
         Baseline::Fdk => {
             if iters.is_some() {

@@ -74,9 +74,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         TrainMethod::Gaussians(m) => m,
         TrainMethod::Baseline(b) => return run_baseline(b, &args),
     };
-    if args.baseline.vm_lines.is_some() {
-        bail!("invalid `--vm-lines`: only for the TensoRF presets (tensorf, tensorf-full)");
-    }
+    crate::baseline::check_vm_lines(method.name(), args.baseline.vm_lines)?;
     init_threads(args.threads)?;
     if args.resume.is_some() && method != Method::Unispine {
         bail!("--method cannot be combined with --resume (the run's config.json is used)");
