@@ -394,6 +394,49 @@ fn as_f32_mut<R: Real>(s: &mut [R]) -> Option<&mut [f32]> {
         .then(|| unsafe { std::slice::from_raw_parts_mut(s.as_mut_ptr() as *mut f32, s.len()) })
 }
 
+/// `c = init + A b` on `simd` (`A`: `m x kk` with layout `al`, `b`: `kk x nn` with row stride
+/// `ldb`, `c`: `m x nn` with row stride `ldc`; `init` is `bias[j]` when given, else the
+/// current `c`): the blocked kernels for f32, the same chains as plain loops for f64.
+#[allow(clippy::too_many_arguments)]
+fn product<R: Real>(
+    simd: Simd,
+    a: &[R],
+    al: ALayout,
+    b: &[R],
+    ldb: usize,
+    bias: Option<&[R]>,
+    c: &mut [R],
+    ldc: usize,
+    (m, nn, kk): (usize, usize, usize),
+) {
+    if let (Some(a), Some(b)) = (as_f32(a), as_f32(b)) {
+        let o = Operands {
+            a,
+            al,
+            b,
+            ldb,
+            bias: bias.map(|v| as_f32(v).expect("same type as a")),
+            ldc,
+            m,
+            nn,
+            kk,
+        };
+        return kernel(simd, o, as_f32_mut(c).expect("same type as a"));
+    }
+    for i in 0..m {
+        let ci = &mut c[i * ldc..i * ldc + nn];
+        if let Some(bv) = bias {
+            ci.copy_from_slice(&bv[..nn]);
+        }
+        for t in 0..kk {
+            let av = a[i * al.row_stride + t * al.col_stride];
+            for (cv, &bv) in ci.iter_mut().zip(&b[t * ldb..t * ldb + nn]) {
+                *cv += av * bv;
+            }
+        }
+    }
+}
+
 /// Forward of a layer: `z[r][o] = b[o] + sum_k x[r][k] w[k][o]` (`x`: `n x inp`, `w`:
 /// `inp x out`, `z`: `n x out`), with the instruction set `simd`.
 #[allow(clippy::too_many_arguments)]
@@ -407,34 +450,11 @@ pub fn forward<R: Real>(
     out: usize,
     z: &mut [R],
 ) {
-    if let (Some(x), Some(w), Some(b)) = (as_f32(x), as_f32(w), as_f32(b)) {
-        let z = as_f32_mut(z).expect("same type as x");
-        let o = Operands {
-            a: x,
-            al: ALayout {
-                row_stride: inp,
-                col_stride: 1,
-            },
-            b: w,
-            ldb: out,
-            bias: Some(b),
-            ldc: out,
-            m: n,
-            nn: out,
-            kk: inp,
-        };
-        return kernel(simd, o, z);
-    }
-    for r in 0..n {
-        let zr = &mut z[r * out..(r + 1) * out];
-        zr.copy_from_slice(b);
-        for k in 0..inp {
-            let a = x[r * inp + k];
-            for (zo, &wv) in zr.iter_mut().zip(&w[k * out..(k + 1) * out]) {
-                *zo += a * wv;
-            }
-        }
-    }
+    let al = ALayout {
+        row_stride: inp,
+        col_stride: 1,
+    };
+    product(simd, x, al, w, out, Some(b), z, out, (n, out, inp));
 }
 
 /// `wt[o][k] = w[k][o]` (`w`: `inp x out`).
@@ -459,33 +479,11 @@ pub fn grad_input<R: Real>(
     dx: &mut [R],
 ) {
     dx[..n * inp].iter_mut().for_each(|v| *v = R::zero());
-    if let (Some(g), Some(wt)) = (as_f32(g), as_f32(wt)) {
-        let dx = as_f32_mut(dx).expect("same type as g");
-        let o = Operands {
-            a: g,
-            al: ALayout {
-                row_stride: out,
-                col_stride: 1,
-            },
-            b: wt,
-            ldb: inp,
-            bias: None,
-            ldc: inp,
-            m: n,
-            nn: inp,
-            kk: out,
-        };
-        return kernel(simd, o, dx);
-    }
-    for r in 0..n {
-        let dr = &mut dx[r * inp..(r + 1) * inp];
-        for o in 0..out {
-            let gv = g[r * out + o];
-            for (d, &wv) in dr.iter_mut().zip(&wt[o * inp..(o + 1) * inp]) {
-                *d += gv * wv;
-            }
-        }
-    }
+    let al = ALayout {
+        row_stride: out,
+        col_stride: 1,
+    };
+    product(simd, g, al, wt, inp, None, dx, inp, (n, inp, out));
 }
 
 /// `gw[k][o] += sum_r x[r][k] g[r][o]` and `gb[o] += sum_r g[r][o]`, rows in order.
@@ -501,33 +499,11 @@ pub fn grad_weight<R: Real>(
     gb: &mut [R],
 ) {
     super::act::sum_rows(simd, g, n, out, gb);
-    if let (Some(x), Some(g)) = (as_f32(x), as_f32(g)) {
-        let gw = as_f32_mut(gw).expect("same type as x");
-        let o = Operands {
-            a: x,
-            al: ALayout {
-                row_stride: 1,
-                col_stride: inp,
-            },
-            b: g,
-            ldb: out,
-            bias: None,
-            ldc: out,
-            m: inp,
-            nn: out,
-            kk: n,
-        };
-        return kernel(simd, o, gw);
-    }
-    for r in 0..n {
-        let gr = &g[r * out..(r + 1) * out];
-        for k in 0..inp {
-            let xv = x[r * inp + k];
-            for (a, &gv) in gw[k * out..(k + 1) * out].iter_mut().zip(gr) {
-                *a += xv * gv;
-            }
-        }
-    }
+    let al = ALayout {
+        row_stride: 1,
+        col_stride: inp,
+    };
+    product(simd, x, al, g, out, None, gw, out, (inp, out, n));
 }
 
 /// `c[i][j] += sum_t A(i, t) b[t][j]` (t in order, from the current `c`), with
@@ -548,33 +524,11 @@ pub fn accumulate<R: Real>(
     nn: usize,
     kk: usize,
 ) {
-    if let (Some(a), Some(b)) = (as_f32(a), as_f32(b)) {
-        let c = as_f32_mut(c).expect("same type as a");
-        let o = Operands {
-            a,
-            al: ALayout {
-                row_stride,
-                col_stride,
-            },
-            b,
-            ldb,
-            bias: None,
-            ldc,
-            m,
-            nn,
-            kk,
-        };
-        return kernel(simd, o, c);
-    }
-    for i in 0..m {
-        let ci = &mut c[i * ldc..i * ldc + nn];
-        for t in 0..kk {
-            let av = a[i * row_stride + t * col_stride];
-            for (cv, &bv) in ci.iter_mut().zip(&b[t * ldb..t * ldb + nn]) {
-                *cv += av * bv;
-            }
-        }
-    }
+    let al = ALayout {
+        row_stride,
+        col_stride,
+    };
+    product(simd, a, al, b, ldb, None, c, ldc, (m, nn, kk));
 }
 
 /// Floating-point operations of one layer's forward (`2 n inp out`) or of each backward
