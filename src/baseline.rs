@@ -21,7 +21,7 @@
 
 use std::fmt::Write as _;
 use std::path::Path;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use ndarray::{Array3, ShapeBuilder};
@@ -30,10 +30,14 @@ use crate::dataset::Dataset;
 use crate::drr::{self, Projector};
 use crate::error::{Error, Result};
 use crate::eval::{self, EvalResult, ViewMetrics};
+use crate::field::checkpoint::FieldCheckpoint;
 use crate::field::encode::VmLines;
+use crate::field::train::FieldTrainer;
 use crate::field::{EncoderConfig, Field, FieldConfig};
+use crate::fsio;
 use crate::image2d::Image2d;
-use crate::train::{EvalPoint, Event, Method, Metrics};
+use crate::train::run_dir::{CHECKPOINT, CONFIG};
+use crate::train::{EvalPoint, Event, Method, Metrics, RunDir};
 use crate::volume::Volume;
 
 /// A baseline method.
@@ -390,6 +394,8 @@ pub struct BaselineOptions {
     pub seed: Option<u64>,
     /// TensoRF's line factor (`tensorf*` presets only; default the preset's, `upstream`).
     pub vm_lines: Option<VmLines>,
+    /// Stop a field run (with a checkpoint) once this many iterations are done.
+    pub stop_after: Option<usize>,
 }
 
 /// `--vm-lines` is given only to a TensoRF preset (`method`: the method's name).
@@ -416,6 +422,8 @@ pub fn run(
 ) -> Result<Metrics> {
     let iters = opts.iters;
     check_vm_lines(baseline.name(), opts.vm_lines)?;
+    // A field run's folder is set up when it starts (checkpoints go there); FDK's at the end.
+    let mut store = None;
     let (o, write_model): (Outcome, ModelWriter) = match baseline {
         Baseline::Fdk => {
             if iters.is_some() {
@@ -452,7 +460,19 @@ pub fn run(
             {
                 *lines = l;
             }
-            let (o, field) = run_field(cfg, ds, stop, on_event)?;
+            cfg.validate()?;
+            store = out.map(RunDir::create).transpose()?;
+            if let Some(rd) = &store {
+                fsio::write_json_atomic(&rd.path(CONFIG), &field_config_json(&cfg, &[]))?;
+            }
+            let (o, field) = run_field(
+                cfg,
+                ds,
+                (stop, opts.stop_after),
+                on_event,
+                store.as_ref(),
+                None,
+            )?;
             (
                 o,
                 Box::new(move |dir: &Path| {
@@ -461,25 +481,97 @@ pub fn run(
             )
         }
     };
-    if let Some(dir) = out {
-        let rd = crate::train::RunDir::create(dir)?;
-        write_model(dir)?;
-        write_run(dir, &rd, ds, &o, 4)?;
+    let store = match store {
+        Some(rd) => Some(rd),
+        None => out.map(RunDir::create).transpose()?,
+    };
+    if let Some(rd) = store {
+        write_model(rd.root())?;
+        write_run(rd.root(), &rd, ds, &o, 4)?;
     }
     Ok(o.metrics)
 }
 
-/// Train a field preset, then render and score the test views (every `eval_stride`-th).
+/// Continue the stopped field run in `dir` (its `config.json` and `checkpoint.bin`) on `ds`,
+/// with the same bits as a run that never stopped; writes the run folder as [`run`] does.
+pub fn resume(
+    dir: &Path,
+    ds: &Dataset,
+    stop: &AtomicBool,
+    stop_after: Option<usize>,
+    on_event: &mut dyn FnMut(&Event),
+) -> Result<Metrics> {
+    let rd = RunDir::open(dir)?;
+    let cfg: FieldConfig = rd.read_config()?;
+    cfg.validate()?;
+    let n_params = Field::<f32>::new(&cfg)?.params.len();
+    let path = rd.path(CHECKPOINT);
+    let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+    let c = FieldCheckpoint::from_bytes(&path, &bytes, &cfg, n_params)?;
+    drop(bytes);
+    let (o, field) = run_field(cfg, ds, (stop, stop_after), on_event, Some(&rd), Some(&c))?;
+    crate::field::model::save(&rd.path("model.npz"), &field)?;
+    write_run(rd.root(), &rd, ds, &o, 4)?;
+    Ok(o.metrics)
+}
+
+/// Iterations between the checkpoints of a field run with a run folder (and one when it
+/// stops early).
+pub const FIELD_CHECKPOINT_EVERY: usize = 1000;
+
+/// `config.json` of a field run (written when it starts, so that a stopped run can be
+/// resumed, and again at the end with the evaluated views).
+fn field_config_json(cfg: &FieldConfig, views: &[usize]) -> serde_json::Value {
+    let mut config = serde_json::to_value(cfg).expect("config serialises");
+    config["method"] = serde_json::Value::String(cfg.label());
+    config["evaluated_test_views"] = serde_json::json!(views);
+    config
+}
+
+/// Train a field preset (from `resume` when given), then render and score the test views
+/// (every `eval_stride`-th). With `store`, `checkpoint.bin` is written every
+/// [`FIELD_CHECKPOINT_EVERY`] iterations and when `stop` ends the run, and removed when it
+/// completes.
 pub fn run_field(
     cfg: FieldConfig,
     ds: &Dataset,
-    stop: &AtomicBool,
+    (stop, stop_after): (&AtomicBool, Option<usize>),
     on_event: &mut dyn FnMut(&Event),
+    store: Option<&RunDir>,
+    resume: Option<&FieldCheckpoint>,
 ) -> Result<(Outcome, Field<f32>)> {
     let total = cfg.iterations;
-    let mut log = String::from("iteration,view,loss,data,ssim,psnr,n_gaussians,seconds\n");
+    let mut tr = FieldTrainer::new(cfg, ds)?;
+    let (mut log, before) = match resume {
+        Some(c) => {
+            tr.restore(c);
+            (c.log.clone(), c.train_time_s)
+        }
+        None => (
+            String::from("iteration,view,loss,data,ssim,psnr,n_gaussians,seconds\n"),
+            0.0,
+        ),
+    };
+    let save = |tr: &FieldTrainer, t: f64, log: &str| -> Result<()> {
+        match store {
+            Some(rd) => fsio::write_atomic(
+                &rd.path(CHECKPOINT),
+                &tr.checkpoint(t, log).to_bytes(&tr.cfg),
+            ),
+            None => Ok(()),
+        }
+    };
+    let t0 = Instant::now();
+    let elapsed = || before + t0.elapsed().as_secs_f64();
     let (mut win_t, mut win_it, mut its) = (Instant::now(), 0usize, 0.0f64);
-    let (tr, completed, train_time) = crate::field::train::train(cfg, ds, stop, &mut |s, t| {
+    let mut completed = true;
+    while tr.iteration < total {
+        if stop.load(Ordering::SeqCst) || stop_after.is_some_and(|k| tr.iteration >= k) {
+            completed = false;
+            break;
+        }
+        let s = tr.step()?;
+        let t = elapsed();
         // psnr column: 10 log10(1 / loss), the loss in (metres x normalised value)^2.
         let psnr = -10.0 * s.loss.max(1e-30).log10();
         let _ = writeln!(
@@ -504,7 +596,16 @@ pub fn run_field(
             n_gaussians: 0,
             its_per_sec: its,
         });
-    })?;
+        if s.iteration.is_multiple_of(FIELD_CHECKPOINT_EVERY) && s.iteration < total {
+            save(&tr, t, &log)?;
+        }
+    }
+    let train_time = elapsed();
+    match (completed, store) {
+        (false, _) => save(&tr, train_time, &log)?,
+        (true, Some(rd)) => fsio::remove_if_exists(&rd.path(CHECKPOINT))?,
+        (true, None) => {}
+    }
     let views = tr.eval_views();
     let (mut ev, mut renders, mut fps, mut eval_time) = (None, Vec::new(), None, 0.0);
     if completed {
@@ -560,9 +661,7 @@ pub fn run_field(
         compaction: None,
         model_bytes: Some(params * 4),
     };
-    let mut config = serde_json::to_value(&cfg).expect("config serialises");
-    config["method"] = serde_json::Value::String(cfg.label());
-    config["evaluated_test_views"] = serde_json::json!(views);
+    let config = field_config_json(&cfg, &views);
     let field = tr.field;
     Ok((
         Outcome {

@@ -164,8 +164,8 @@ fn a_field_run_follows_its_seed() {
 
 /// SIGTERM / SIGINT during a field baseline run: it stops at the next iteration boundary,
 /// writes the model and a `metrics.json` with `"completed": false` (the log holds every
-/// iteration done) and exits 143 / 130 like the Gaussian trainer. `--resume` of such a run is
-/// a clear error.
+/// iteration done) and a checkpoint, and exits 143 / 130 like the Gaussian trainer; `--resume`
+/// continues it.
 #[test]
 fn a_signal_stops_a_field_run_with_its_model_and_metrics() {
     use std::io::BufRead;
@@ -218,14 +218,91 @@ fn a_signal_stops_a_field_run_with_its_model_and_metrics() {
         assert!(run.join("model.npz").is_file() && run.join("config.json").is_file());
         let log = std::fs::read_to_string(run.join("log.csv")).unwrap();
         assert_eq!(log.lines().count(), m.iterations + 1, "{log}");
-        let o = unispine(&["train", "--resume", name], d);
-        assert_eq!(o.status.code(), Some(1));
-        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(run.join("checkpoint.bin").is_file());
+        let more = (m.iterations + 3).to_string();
+        ok(
+            &[
+                "train",
+                "--resume",
+                name,
+                "--data",
+                "ph",
+                "--stop-after",
+                &more,
+            ],
+            d,
+        );
+        let log = std::fs::read_to_string(run.join("log.csv")).unwrap();
+        assert_eq!(log.lines().count(), m.iterations + 4, "{log}");
+    }
+}
+
+/// A field run stopped after 12 of 30 iterations and resumed (on another thread count) ends
+/// with the bits and the log of the run that never stopped; its `--threads` is followed; a
+/// damaged checkpoint or a setting given to `--resume` is an error naming it.
+#[test]
+fn a_resumed_field_run_has_the_bits_of_one_that_never_stopped() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    phantom(d, 32, 16, 4, 2);
+    for m in ["intratomo", "tensorf"] {
+        let (full, part) = (format!("full-{m}"), format!("part-{m}"));
+        let base = ["train", "--data", "ph", "--method", m, "--iters", "30"];
+        ok(&[&base[..], &["--out", &full]].concat(), d);
+        let args = [&base[..], &["--stop-after", "12", "--out", &part]].concat();
+        let out = ok(&args, d);
+        assert!(out.contains("stopped at iteration 12"), "{out}");
+        let p = d.join(&part);
+        assert!(p.join("checkpoint.bin").is_file());
+        // A setting of the run: clap refuses --iters (usage error), the check --vm-lines.
+        let o = unispine(&["train", "--resume", &part, "--iters", "40"], d);
+        assert_eq!(o.status.code(), Some(2), "{m}");
+        let o = unispine(&["train", "--resume", &part, "--vm-lines", "corrected"], d);
+        assert_eq!(o.status.code(), Some(1), "{m}");
+        assert!(String::from_utf8_lossy(&o.stderr).contains("own config.json"));
+        ok(
+            &["train", "--resume", &part, "--data", "ph", "--threads", "1"],
+            d,
+        );
+        let f = d.join(&full);
+        assert_eq!(
+            std::fs::read(f.join("model.npz")).unwrap(),
+            std::fs::read(p.join("model.npz")).unwrap(),
+            "{m}: resumed model differs"
+        );
+        let cols = |run: &Path| -> Vec<String> {
+            let log = std::fs::read_to_string(run.join("log.csv")).unwrap();
+            // Every column but the wall-clock seconds.
+            log.lines()
+                .map(|l| l.rsplit_once(',').unwrap().0.to_string())
+                .collect()
+        };
+        assert_eq!(cols(&f), cols(&p), "{m}");
+        let mt: Metrics =
+            serde_json::from_str(&std::fs::read_to_string(p.join("metrics.json")).unwrap())
+                .unwrap();
+        assert!(mt.completed && mt.iterations == 30 && mt.threads == 1);
         assert!(
-            e.contains("--resume") && e.contains("`naf`") && e.contains("cannot be resumed"),
-            "{e}"
+            !p.join("checkpoint.bin").exists(),
+            "a completed run keeps no checkpoint"
         );
     }
+    // A truncated checkpoint.
+    let args = ["train", "--data", "ph", "--method", "naf", "--iters", "30"];
+    ok(
+        &[&args[..], &["--stop-after", "5", "--out", "cut"]].concat(),
+        d,
+    );
+    let ck = d.join("cut/checkpoint.bin");
+    let b = std::fs::read(&ck).unwrap();
+    std::fs::write(&ck, &b[..b.len() - 10]).unwrap();
+    let o = unispine(&["train", "--resume", "cut", "--data", "ph"], d);
+    assert_eq!(o.status.code(), Some(1));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        e.contains("checkpoint.bin") && e.contains("truncated"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -224,21 +224,32 @@ fn bad_plans_are_errors_naming_the_line_before_anything_runs() {
     assert!(String::from_utf8_lossy(&o.stdout).contains("name = \"table2\""));
 }
 
+/// A Gaussian cell and a neural-field cell, each stopped at iteration 12 of 30 as a preempted
+/// job leaves it, resume on the next harness run and end with the uninterrupted model's bits.
 #[test]
 fn a_stopped_cell_resumes_from_its_checkpoint_with_the_same_bits() {
+    for (method, model, started) in [
+        ("unispine", "model.ply", "resuming `unispine`"),
+        ("intratomo", "model.npz", "resuming `intratomo`"),
+    ] {
+        stopped_cell_resumes(method, model, started);
+    }
+}
+
+fn stopped_cell_resumes(method: &str, model: &str, started: &str) {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let plan = tiny_plan(30, "")
         .replace("seeds = [0, 1]", "seeds = [0]")
         .replace(
             "methods = [\"xgaussian\", \"unispine\"]",
-            "methods = [\"unispine\"]",
+            &format!("methods = [\"{method}\"]"),
         );
     std::fs::write(dir.join("plan.toml"), plan).unwrap();
     let o = reproduce(&["plan.toml", "--out", "a"], dir);
     assert!(o.status.success(), "{}", text(&o));
-    let cell = dir.join("a/runs/ph/unispine/seed0");
-    let straight = std::fs::read(cell.join("model.ply")).unwrap();
+    let cell = dir.join(format!("a/runs/ph/{method}/seed0"));
+    let straight = std::fs::read(cell.join(model)).unwrap();
     let csv = std::fs::read_to_string(dir.join("a/results.csv")).unwrap();
 
     // What a preempted cell leaves: the same cell's run stopped at iteration 12 with a
@@ -261,7 +272,7 @@ fn a_stopped_cell_resumes_from_its_checkpoint_with_the_same_bits() {
     assert!(o.status.success(), "{}", text(&o));
     let m = std::fs::read_to_string(cell.join("metrics.json")).unwrap();
     assert!(m.contains("\"completed\": false"), "{m}");
-    assert!(!cell.join("model.ply").exists());
+    assert!(cell.join("checkpoint.bin").is_file(), "{method}");
     let r = std::fs::read_to_string(&rec_path).unwrap();
     std::fs::write(&rec_path, r.replace("\"done\"", "\"stopped\"")).unwrap();
 
@@ -270,10 +281,10 @@ fn a_stopped_cell_resumes_from_its_checkpoint_with_the_same_bits() {
     assert!(text(&o).contains("resumed, done"), "{}", text(&o));
     let log = std::fs::read_to_string(cell.join("train.log")).unwrap();
     assert!(log.contains("resumed from the checkpoint"), "{log}");
-    assert!(log.contains("resuming `unispine`"), "{log}");
+    assert!(log.contains(started), "{log}");
     assert!(
-        std::fs::read(cell.join("model.ply")).unwrap() == straight,
-        "the resumed cell's model.ply differs from the uninterrupted one"
+        std::fs::read(cell.join(model)).unwrap() == straight,
+        "the resumed {method} cell's {model} differs from the uninterrupted one"
     );
     let csv2 = std::fs::read_to_string(dir.join("a/results.csv")).unwrap();
     assert_eq!(deterministic_columns(&csv2), deterministic_columns(&csv));

@@ -6,7 +6,7 @@
 //! SIGINT / SIGTERM that writes a checkpoint and exits 130 / 143 ([`super::signals`]), and the
 //! run folder described in [`crate::train::run_dir`].
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 
@@ -14,7 +14,7 @@ use super::progress::Progress;
 use super::signals;
 use crate::baseline::{Baseline, TrainMethod};
 use crate::error::Error;
-use crate::train::{self, Control, Event, Method, RunDir, TrainOverrides};
+use crate::train::{self, Control, Event, Method, Metrics, RunDir, TrainOverrides};
 
 /// Arguments of `unispine train`.
 #[derive(Debug, clap::Args)]
@@ -70,6 +70,11 @@ pub fn init_threads(threads: Option<usize>) -> anyhow::Result<()> {
 
 /// Run `unispine train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
+    if let (Some(run), TrainMethod::Gaussians(Method::Unispine)) = (&args.resume, &args.method) {
+        if RunDir::open(run)?.is_field_run()? {
+            return resume_field(run, &args);
+        }
+    }
     let method = match args.method {
         TrainMethod::Gaussians(m) => m,
         TrainMethod::Baseline(b) => return run_baseline(b, &args),
@@ -263,15 +268,16 @@ impl clap::builder::TypedValueParser for MethodParser {
     }
 }
 
-/// `unispine train --method BASELINE`: the baseline's own trainer, the same run folder
-/// (no resume; Ctrl-C / SIGTERM stop a field run after the current iteration without
-/// evaluation and exit 130 / 143).
+/// `unispine train --method BASELINE`: the baseline's own trainer, the same run folder,
+/// `--threads` as for the Gaussians.
+/// Ctrl-C / SIGTERM stop a field run after the current iteration without evaluation (with a
+/// checkpoint) and exit 130 / 143.
 fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
     let Some(data) = args.data.as_ref() else {
         bail!("invalid `--data`: a baseline needs a dataset folder");
     };
     if args.resume.is_some() {
-        bail!("invalid `--resume`: baselines cannot be resumed");
+        bail!("--method cannot be combined with --resume (the run's config.json is used)");
     }
     let Some(out) = args.out.as_ref() else {
         bail!("invalid `--out`: a baseline needs a run folder");
@@ -288,48 +294,104 @@ fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
             crate::baseline::FLAGS.join(", --")
         );
     }
-    let ds = crate::dataset::store::load(data)?;
-    // A field run stops at the next iteration boundary on SIGINT / SIGTERM and writes what it
-    // has (model, `metrics.json` with `"completed": false`); FDK is one pass and keeps the
-    // default signal behaviour.
+    let opts = crate::baseline::BaselineOptions {
+        iters: args.iters,
+        seed: args.overrides.seed,
+        vm_lines: args.baseline.vm_lines,
+        stop_after: args.stop_after,
+    };
+    // FDK is one pass and keeps the default signal behaviour.
     let field = matches!(b, Baseline::Field(_));
+    drive_baseline(
+        &format!("running `{}`", b.name()),
+        data,
+        out,
+        field,
+        args.threads,
+        |ds, on_event| crate::baseline::run(b, ds, Some(out), opts, &signals::STOP, on_event),
+    )
+}
+
+/// `unispine train --resume RUN` of a stopped neural-field run (`--data`: default the dataset
+/// recorded in its `config.json`).
+fn resume_field(run: &Path, args: &TrainArgs) -> anyhow::Result<()> {
+    if args.out.is_some()
+        || args.iters.is_some()
+        || args.baseline.vm_lines.is_some()
+        || !args.overrides.given().is_empty()
+    {
+        bail!(
+            "--resume continues the run with its own config.json: give only --data and --threads"
+        );
+    }
+    let rd = RunDir::open(run)?;
+    let data = match (&args.data, rd.dataset_path()?) {
+        (Some(d), _) => d.clone(),
+        (None, Some(d)) => d,
+        (None, None) => bail!(
+            "invalid `--data`: {} records no dataset; give --data",
+            run.display()
+        ),
+    };
+    let v: serde_json::Value = rd.read_config()?;
+    let name = v
+        .get("preset")
+        .and_then(|p| p.as_str())
+        .unwrap_or("field")
+        .to_string();
+    drive_baseline(
+        &format!("resuming `{name}`"),
+        &data,
+        run,
+        true,
+        args.threads,
+        |ds, on_event| crate::baseline::resume(run, ds, &signals::STOP, args.stop_after, on_event),
+    )
+}
+
+/// Load the dataset, print `headline`, run `go` with a progress bar, report (a stopped field run exits 130 /
+/// 143 after naming its checkpoint).
+fn drive_baseline(
+    headline: &str,
+    data: &Path,
+    out: &Path,
+    field: bool,
+    threads: Option<usize>,
+    go: impl FnOnce(&crate::dataset::Dataset, &mut dyn FnMut(&Event)) -> crate::error::Result<Metrics>,
+) -> anyhow::Result<()> {
+    let ds = crate::dataset::store::load(data)?;
+    init_threads(threads)?;
     if field {
         signals::install()?;
     }
-    eprintln!(
-        "running `{}` on {} -> {}",
-        b.name(),
-        data.display(),
-        out.display()
-    );
+    eprintln!("{headline} on {} -> {}", data.display(), out.display());
     let mut bar: Option<Progress> = None;
     let mut on_event = |e: &Event| {
         if let Event::Progress {
+            iteration,
             total,
             loss,
             its_per_sec,
             ..
         } = e
         {
-            let b = bar.get_or_insert_with(|| Progress::new("train", *total as u64));
+            let b = bar.get_or_insert_with(|| {
+                Progress::starting_at("train", *total as u64, (*iteration - 1) as u64)
+            });
             b.inc(1, &format!("loss {loss:.3e} {its_per_sec:.1} it/s"));
         }
     };
-    let opts = crate::baseline::BaselineOptions {
-        iters: args.iters,
-        seed: args.overrides.seed,
-        vm_lines: args.baseline.vm_lines,
-    };
-    let m = crate::baseline::run(b, &ds, Some(out), opts, &signals::STOP, &mut on_event);
+    let m = go(&ds, &mut on_event);
     if let Some(b) = bar.take() {
         b.finish("");
     }
     let m = m?;
     if !m.completed {
         println!(
-            "stopped at iteration {}; model and metrics.json written to {} (baseline runs \
-             cannot be resumed)",
+            "stopped at iteration {}; model, metrics.json and checkpoint.bin written to {} \
+             (continue with `unispine train --resume {}`)",
             m.iterations,
+            out.display(),
             out.display()
         );
         if let Some(code) = signals::exit_code() {

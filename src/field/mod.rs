@@ -27,6 +27,7 @@
 pub mod act;
 pub mod adam;
 pub mod bench;
+pub mod checkpoint;
 pub mod encode;
 pub mod gemm;
 pub mod mlp;

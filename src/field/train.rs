@@ -17,7 +17,6 @@
 //! (points, encodings, MLP caches, gradients) live in a [`Workspace`] kept by the trainer and
 //! are not reallocated once grown; the batch's ray list and pixel permutation still are.
 
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
@@ -26,6 +25,7 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 use super::adam::FlatAdam;
+use super::checkpoint::FieldCheckpoint;
 use super::mlp::Cache;
 use super::render::{self, Ray, MM};
 use super::{Field, FieldConfig};
@@ -498,6 +498,29 @@ impl<'a> FieldTrainer<'a> {
         })
     }
 
+    /// The state after the iterations done, with the training time and log so far.
+    pub fn checkpoint(&self, train_time_s: f64, log: &str) -> FieldCheckpoint {
+        FieldCheckpoint {
+            iteration: self.iteration,
+            train_time_s,
+            log: log.to_string(),
+            params: self.field.params.clone(),
+            adam_m: self.adam.m.clone(),
+            adam_v: self.adam.v.clone(),
+            adam_step: self.adam.step,
+        }
+    }
+
+    /// Continue from `c` (read for this run's config: [`FieldCheckpoint::from_bytes`] checked
+    /// its sizes).
+    pub fn restore(&mut self, c: &FieldCheckpoint) {
+        self.iteration = c.iteration;
+        self.field.params.clone_from(&c.params);
+        self.adam.m.clone_from(&c.adam_m);
+        self.adam.v.clone_from(&c.adam_v);
+        self.adam.step = c.adam_step;
+    }
+
     /// Render test view `k` in the dataset's units.
     pub fn render_test(&self, k: usize) -> Image2d<f32> {
         render_view(
@@ -516,25 +539,4 @@ impl<'a> FieldTrainer<'a> {
             .step_by(self.cfg.eval_stride)
             .collect()
     }
-}
-
-/// Train to the end (or until `stop`), calling `on_step` after each iteration.
-pub fn train<'a>(
-    cfg: FieldConfig,
-    ds: &'a Dataset,
-    stop: &AtomicBool,
-    on_step: &mut dyn FnMut(&FieldStep, f64),
-) -> Result<(FieldTrainer<'a>, bool, f64)> {
-    let mut tr = FieldTrainer::new(cfg, ds)?;
-    let t0 = Instant::now();
-    let mut completed = true;
-    while tr.iteration < tr.cfg.iterations {
-        if stop.load(Ordering::SeqCst) {
-            completed = false;
-            break;
-        }
-        let s = tr.step()?;
-        on_step(&s, t0.elapsed().as_secs_f64());
-    }
-    Ok((tr, completed, t0.elapsed().as_secs_f64()))
 }

@@ -7,7 +7,7 @@
 //! |---|---|---|
 //! | `config.json` | at the start | the method's full config ([`crate::train::TrainConfig`] for Gaussians); `data` = dataset folder, absolute |
 //! | `log.csv` | at checkpoints and at the end | one row per iteration (the `seconds` column is wall-clock; every other column is deterministic) |
-//! | `checkpoint.bin` | at 0, every `checkpoint_every`, on stop / signal, at the end | everything a resume needs, in one file ([`Checkpoint`]) |
+//! | `checkpoint.bin` | at 0, every `checkpoint_every`, on stop / signal, at the end | everything a resume needs, in one file ([`Checkpoint`]); a neural-field run's ([`crate::field::checkpoint`]) every 1000 iterations and on stop / signal, removed when it completes |
 //! | `model.ply` | when the run completes | the final model (3DGS PLY) with a `comment unispine-render {...}` line recording how to render it ([`crate::render::RenderSettings::to_ply_comment`]) |
 //! | `previews/test_KK.png` | when the run completes | render of the final model beside its ground truth |
 //! | `metrics.json` | at the end (completed, stopped or signalled) | [`Metrics`] |
@@ -193,26 +193,31 @@ impl RunDir {
         self.read_json(CONFIG, "config")
     }
 
-    /// An error when the folder holds a baseline run (`unispine train --method fdk | naf | ...`,
-    /// recognised by its `config.json`): only Gaussian runs have a checkpoint to resume from.
+    /// Whether the folder holds a neural-field run (its `config.json` names a field preset):
+    /// those resume through [`crate::baseline::resume`].
+    pub fn is_field_run(&self) -> Result<bool> {
+        let v: serde_json::Value = self.read_json(CONFIG, "config")?;
+        Ok(v.get("preset").is_some_and(|p| p.is_string()))
+    }
+
+    /// An error when the folder does not hold a Gaussian run to resume: an FDK run (one pass,
+    /// nothing to resume) or a neural-field run (resumed by [`crate::baseline::resume`]),
+    /// recognised by its `config.json`.
     pub fn check_resumable(&self) -> Result<()> {
         let v: serde_json::Value = self.read_json(CONFIG, "config")?;
-        let baseline = match (v.get("preset"), v.get("method")) {
-            (Some(p), _) => p.as_str().map(str::to_string),
-            (None, Some(m)) if m == "fdk" => Some("fdk".to_string()),
-            _ => None,
+        let why = match (v.get("preset").and_then(|p| p.as_str()), v.get("method")) {
+            (Some(p), _) => format!("a `{p}` neural-field run: resume it with `baseline::resume`"),
+            (None, Some(m)) if m == "fdk" => {
+                "an FDK run: FDK runs in one pass, nothing to resume (train it again with \
+                 `unispine train --method fdk`)"
+                    .to_string()
+            }
+            _ => return Ok(()),
         };
-        match baseline {
-            Some(name) => Err(Error::invalid(
-                "--resume",
-                format!(
-                    "{} holds a `{name}` baseline run: baseline runs cannot be resumed (train \
-                     it again with `unispine train --method {name}`)",
-                    self.root.display()
-                ),
-            )),
-            None => Ok(()),
-        }
+        Err(Error::invalid(
+            "--resume",
+            format!("{} holds {why}", self.root.display()),
+        ))
     }
 
     /// The dataset folder recorded in `config.json` (`data`): absolute as written by `train`;
@@ -357,6 +362,26 @@ impl RunDir {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_fdk_folder_is_not_resumable() {
+        let dir = tempfile::tempdir().unwrap();
+        let rd = RunDir::create(dir.path()).unwrap();
+        std::fs::write(rd.path(CONFIG), r#"{"method": "fdk"}"#).unwrap();
+        let e = rd.check_resumable().unwrap_err().to_string();
+        assert!(
+            e.contains("--resume") && e.contains("nothing to resume"),
+            "{e}"
+        );
+        assert!(!rd.is_field_run().unwrap());
+        std::fs::write(
+            rd.path(CONFIG),
+            r#"{"preset": "naf", "method": "naf (reduced)"}"#,
+        )
+        .unwrap();
+        assert!(rd.is_field_run().unwrap());
+        assert!(rd.check_resumable().is_err());
+    }
     use crate::densify::TrainState;
     use crate::optim::AdamConfig;
 

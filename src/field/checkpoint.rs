@@ -1,0 +1,254 @@
+//! `checkpoint.bin` of a neural-field run: the parameters, Adam's moments and step count, the
+//! iterations done, the training time and `log.csv` so far, in one file. Nothing else is
+//! needed to continue with the same bits: iteration `it`'s rays, targets and sample jitter
+//! are drawn from generators seeded by the config's seed and `it` alone (see
+//! [`super::train::FieldTrainer::batch`]).
+//!
+//! Layout: the magic line `unispine-field-checkpoint`, a little-endian u64 header length, the
+//! header as JSON ([`Header`]), the log (UTF-8), then the parameters, `m` and `v` as
+//! little-endian f32 arrays of `n_params` values each.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::FieldConfig;
+use crate::error::{Error, Result};
+
+const MAGIC: &[u8] = b"unispine-field-checkpoint\n";
+const VERSION: u32 = 1;
+
+/// Everything a resumed field run needs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FieldCheckpoint {
+    /// Iterations completed.
+    pub iteration: usize,
+    /// Training wall time so far (summed over sessions), seconds.
+    pub train_time_s: f64,
+    /// `log.csv` up to `iteration`.
+    pub log: String,
+    pub params: Vec<f32>,
+    pub adam_m: Vec<f32>,
+    pub adam_v: Vec<f32>,
+    pub adam_step: u64,
+}
+
+/// The JSON header: the run it belongs to and the sizes of what follows.
+#[derive(Serialize, Deserialize)]
+struct Header {
+    format_version: u32,
+    preset: String,
+    seed: u64,
+    iterations_total: usize,
+    iteration: usize,
+    n_params: usize,
+    adam_step: u64,
+    train_time_s: f64,
+    log_bytes: usize,
+}
+
+/// Whether `bytes` start as a field checkpoint (as opposed to a Gaussian run's).
+pub fn is_field_checkpoint(bytes: &[u8]) -> bool {
+    bytes.starts_with(MAGIC)
+}
+
+/// Whether the file at `path` is a field checkpoint (reads only its first line).
+pub fn file_is_field_checkpoint(path: &Path) -> bool {
+    use std::io::Read;
+    let mut head = [0u8; MAGIC.len()];
+    std::fs::File::open(path)
+        .and_then(|mut f| f.read_exact(&mut head))
+        .is_ok()
+        && is_field_checkpoint(&head)
+}
+
+impl FieldCheckpoint {
+    /// The file's bytes for the run configured by `cfg`.
+    pub fn to_bytes(&self, cfg: &FieldConfig) -> Vec<u8> {
+        let h = Header {
+            format_version: VERSION,
+            preset: cfg.preset.clone(),
+            seed: cfg.seed,
+            iterations_total: cfg.iterations,
+            iteration: self.iteration,
+            n_params: self.params.len(),
+            adam_step: self.adam_step,
+            train_time_s: self.train_time_s,
+            log_bytes: self.log.len(),
+        };
+        let hj = serde_json::to_vec(&h).expect("header serialises");
+        let mut b =
+            Vec::with_capacity(MAGIC.len() + 8 + hj.len() + self.log.len() + 12 * h.n_params);
+        b.extend_from_slice(MAGIC);
+        b.extend_from_slice(&(hj.len() as u64).to_le_bytes());
+        b.extend_from_slice(&hj);
+        b.extend_from_slice(self.log.as_bytes());
+        for a in [&self.params, &self.adam_m, &self.adam_v] {
+            for v in a.iter() {
+                b.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        b
+    }
+
+    /// Parse the file `path` (its bytes `bytes`) as a checkpoint of the run configured by
+    /// `cfg` with `n_params` parameters; every mismatch is an error naming the file and field.
+    pub fn from_bytes(
+        path: &Path,
+        bytes: &[u8],
+        cfg: &FieldConfig,
+        n_params: usize,
+    ) -> Result<Self> {
+        let bad = |field: &str, msg: String| Error::format(path, field, msg);
+        let rest = bytes
+            .strip_prefix(MAGIC)
+            .ok_or_else(|| bad("magic", "not a neural-field checkpoint".into()))?;
+        if rest.len() < 8 {
+            return Err(bad("header", "file ends inside the header length".into()));
+        }
+        let hl = u64::from_le_bytes(rest[..8].try_into().expect("8 bytes"));
+        let rest = &rest[8..];
+        let hl = usize::try_from(hl)
+            .ok()
+            .filter(|&l| l <= rest.len())
+            .ok_or_else(|| bad("header", format!("length {hl} exceeds the file")))?;
+        let h: Header = serde_json::from_slice(&rest[..hl])
+            .map_err(|e| bad("header", format!("not valid JSON: {e}")))?;
+        if h.format_version != VERSION {
+            return Err(bad(
+                "format_version",
+                format!("{} (this build reads {VERSION})", h.format_version),
+            ));
+        }
+        let want = |field: &str, got: String, cfg_v: String| -> Result<()> {
+            if got == cfg_v {
+                Ok(())
+            } else {
+                Err(bad(
+                    field,
+                    format!(
+                        "{got}, but the run's config.json says {cfg_v} (not this run's checkpoint)"
+                    ),
+                ))
+            }
+        };
+        want("preset", h.preset.clone(), cfg.preset.clone())?;
+        want("seed", h.seed.to_string(), cfg.seed.to_string())?;
+        want(
+            "iterations_total",
+            h.iterations_total.to_string(),
+            cfg.iterations.to_string(),
+        )?;
+        want("n_params", h.n_params.to_string(), n_params.to_string())?;
+        if h.iteration > cfg.iterations {
+            return Err(bad(
+                "iteration",
+                format!(
+                    "{} is past the run's {} iterations",
+                    h.iteration, cfg.iterations
+                ),
+            ));
+        }
+        if !(h.train_time_s.is_finite() && h.train_time_s >= 0.0) {
+            return Err(bad(
+                "train_time_s",
+                format!("{} is not a time", h.train_time_s),
+            ));
+        }
+        let rest = &rest[hl..];
+        let need = n_params
+            .checked_mul(12)
+            .and_then(|b| b.checked_add(h.log_bytes))
+            .ok_or_else(|| bad("log_bytes", format!("{} is too large", h.log_bytes)))?;
+        if rest.len() != need {
+            return Err(bad(
+                "n_params",
+                format!(
+                    "{n_params} parameters and a {}-byte log need {need} bytes after the header, \
+                     the file has {} (truncated or corrupt)",
+                    h.log_bytes,
+                    rest.len()
+                ),
+            ));
+        }
+        let log = std::str::from_utf8(&rest[..h.log_bytes])
+            .map_err(|_| bad("log", "not UTF-8".into()))?
+            .to_string();
+        let arrays: Vec<Vec<f32>> = rest[h.log_bytes..]
+            .chunks_exact(4 * n_params.max(1))
+            .take(if n_params == 0 { 0 } else { 3 })
+            .map(|c| {
+                c.chunks_exact(4)
+                    .map(|v| f32::from_le_bytes(v.try_into().expect("4 bytes")))
+                    .collect()
+            })
+            .collect();
+        let get = |k: usize| arrays.get(k).cloned().unwrap_or_default();
+        let c = FieldCheckpoint {
+            iteration: h.iteration,
+            train_time_s: h.train_time_s,
+            log,
+            params: get(0),
+            adam_m: get(1),
+            adam_v: get(2),
+            adam_step: h.adam_step,
+        };
+        for (name, a) in [
+            ("params", &c.params),
+            ("adam_m", &c.adam_m),
+            ("adam_v", &c.adam_v),
+        ] {
+            if let Some(i) = a.iter().position(|v| !v.is_finite()) {
+                return Err(bad(name, format!("value {i} is {} (not finite)", a[i])));
+            }
+        }
+        Ok(c)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg() -> FieldConfig {
+        FieldConfig::preset("intratomo", 4).unwrap()
+    }
+
+    fn ckpt(n: usize) -> FieldCheckpoint {
+        FieldCheckpoint {
+            iteration: 7,
+            train_time_s: 1.5,
+            log: "iteration,view\n1,0\n".into(),
+            params: (0..n).map(|i| i as f32 * 0.5).collect(),
+            adam_m: (0..n).map(|i| -(i as f32)).collect(),
+            adam_v: (0..n).map(|i| i as f32 * 1e-3).collect(),
+            adam_step: 7,
+        }
+    }
+
+    #[test]
+    fn round_trips_and_names_what_is_wrong() {
+        let (c, p) = (ckpt(10), Path::new("run/checkpoint.bin"));
+        let b = c.to_bytes(&cfg());
+        assert!(is_field_checkpoint(&b));
+        assert_eq!(FieldCheckpoint::from_bytes(p, &b, &cfg(), 10).unwrap(), c);
+        let err = |bytes: &[u8], cfg: &FieldConfig, n: usize| {
+            FieldCheckpoint::from_bytes(p, bytes, cfg, n)
+                .unwrap_err()
+                .to_string()
+        };
+        // Truncated, another run's parameter count, seed or preset, a Gaussian checkpoint.
+        assert!(err(&b[..b.len() - 3], &cfg(), 10).contains("n_params"));
+        assert!(err(&b, &cfg(), 11).contains("n_params"));
+        let mut other = cfg();
+        other.seed = 3;
+        assert!(err(&b, &other, 10).contains("seed"));
+        let naf = FieldConfig::preset("naf", 4).unwrap();
+        assert!(err(&b, &naf, 10).contains("preset"));
+        assert!(err(b"unispine-checkpoint\n....", &cfg(), 10).contains("magic"));
+        let mut nan = ckpt(10);
+        nan.adam_v[4] = f32::NAN;
+        assert!(err(&nan.to_bytes(&cfg()), &cfg(), 10).contains("adam_v"));
+        assert!(err(&b, &cfg(), 11).contains("run/checkpoint.bin"));
+    }
+}
