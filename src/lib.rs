@@ -71,7 +71,8 @@ pub mod train;
 /// Evaluation: PSNR, SSIM, fps (also run inside the training loop).
 pub mod eval;
 
-/// Table 1's baselines behind `train --method`: scoring of predicted line integrals, run folder.
+/// Table 1's baselines behind `train --method`: scoring of predicted line integrals, run folder,
+/// a field run's checkpoints and resume.
 pub mod baseline;
 
 /// Tables of finished runs.
