@@ -110,8 +110,10 @@ fn kernel_generic<
         w if w > NH => (NM, w),
         w => (NH, w),
     };
+    // A remainder exactly as wide as its tile class is read in place, as a full panel is.
+    let in_place = jw == pw;
     let mut buf = PANEL.with(|cell| cell.take());
-    if pw > 0 {
+    if pw > 0 && !in_place {
         buf.clear();
         buf.resize(o.kk * pw, 0.0);
         for t in 0..o.kk {
@@ -136,21 +138,24 @@ fn kernel_generic<
                 let mut i = i0;
                 while i < i1 {
                     let iw = (i1 - i).min(MR);
-                    // SAFETY: `kernel` checked that every index of the product is in bounds;
-                    // the padded panel holds `kk x pw` values.
+                    // SAFETY: `kernel` checked that every index of the product is in bounds
+                    // (an in-place remainder reads columns `j0 .. nn` of `B`); the padded panel
+                    // holds `kk x pw` values.
                     unsafe {
                         if j0 < jr {
                             let bp = o.b.as_ptr().add(k0 * o.ldb + j0);
                             tile_rows::<MR, NR>(&o, bp, o.ldb, c, i, iw, s)
-                        } else if w == NR {
-                            let bp = buf.as_ptr().add(k0 * pw);
-                            tile_rows::<MR, NR>(&o, bp, pw, c, i, iw, s)
-                        } else if w == NM {
-                            let bp = buf.as_ptr().add(k0 * pw);
-                            tile_rows::<MR, NM>(&o, bp, pw, c, i, iw, s)
                         } else {
-                            let bp = buf.as_ptr().add(k0 * pw);
-                            tile_rows::<MR, NH>(&o, bp, pw, c, i, iw, s)
+                            let (bp, ldp) = if in_place {
+                                (o.b.as_ptr().add(k0 * o.ldb + j0), o.ldb)
+                            } else {
+                                (buf.as_ptr().add(k0 * pw), pw)
+                            };
+                            match w {
+                                w if w == NR => tile_rows::<MR, NR>(&o, bp, ldp, c, i, iw, s),
+                                w if w == NM => tile_rows::<MR, NM>(&o, bp, ldp, c, i, iw, s),
+                                _ => tile_rows::<MR, NH>(&o, bp, ldp, c, i, iw, s),
+                            }
                         }
                     };
                     i += iw;
