@@ -116,6 +116,44 @@ pub fn check_not_output(field: &str, input: &Path, outputs: &[PathBuf]) -> Resul
     Ok(())
 }
 
+/// The start of a framed binary file (the checkpoints): `magic`, a little-endian u64 header
+/// length, the header as JSON; the payload follows.
+pub fn frame_header<H: serde::Serialize>(magic: &[u8], header: &H) -> Vec<u8> {
+    let hj = serde_json::to_vec(header).expect("header serialises");
+    let mut b = Vec::with_capacity(magic.len() + 8 + hj.len());
+    b.extend_from_slice(magic);
+    b.extend_from_slice(&(hj.len() as u64).to_le_bytes());
+    b.extend_from_slice(&hj);
+    b
+}
+
+/// Split the bytes of the framed file `path` ([`frame_header`]) into its parsed header and
+/// the payload; a wrong magic (`what` names the expected kind of file), a length past the end
+/// or a header that is not the JSON of `H` is an error naming the file and field.
+pub fn read_frame<'a, H: serde::de::DeserializeOwned>(
+    path: &Path,
+    bytes: &'a [u8],
+    magic: &[u8],
+    what: &str,
+) -> Result<(H, &'a [u8])> {
+    let bad = |field: &str, msg: String| Error::format(path, field, msg);
+    let rest = bytes
+        .strip_prefix(magic)
+        .ok_or_else(|| bad("magic", format!("not {what}")))?;
+    if rest.len() < 8 {
+        return Err(bad("header", "file ends inside the header length".into()));
+    }
+    let hl = u64::from_le_bytes(rest[..8].try_into().expect("8 bytes"));
+    let rest = &rest[8..];
+    let hl = usize::try_from(hl)
+        .ok()
+        .filter(|&l| l <= rest.len())
+        .ok_or_else(|| bad("header", format!("length {hl} exceeds the file")))?;
+    let h = serde_json::from_slice(&rest[..hl])
+        .map_err(|e| bad("header", format!("not valid JSON: {e}")))?;
+    Ok((h, &rest[hl..]))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

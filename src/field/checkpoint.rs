@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use super::FieldConfig;
 use crate::error::{Error, Result};
+use crate::fsio;
 
 const MAGIC: &[u8] = b"unispine-field-checkpoint\n";
 const VERSION: u32 = 1;
@@ -76,12 +77,8 @@ impl FieldCheckpoint {
             train_time_s: self.train_time_s,
             log_bytes: self.log.len(),
         };
-        let hj = serde_json::to_vec(&h).expect("header serialises");
-        let mut b =
-            Vec::with_capacity(MAGIC.len() + 8 + hj.len() + self.log.len() + 12 * h.n_params);
-        b.extend_from_slice(MAGIC);
-        b.extend_from_slice(&(hj.len() as u64).to_le_bytes());
-        b.extend_from_slice(&hj);
+        let mut b = fsio::frame_header(MAGIC, &h);
+        b.reserve(self.log.len() + 12 * h.n_params);
         b.extend_from_slice(self.log.as_bytes());
         for a in [&self.params, &self.adam_m, &self.adam_v] {
             for v in a.iter() {
@@ -100,20 +97,8 @@ impl FieldCheckpoint {
         n_params: usize,
     ) -> Result<Self> {
         let bad = |field: &str, msg: String| Error::format(path, field, msg);
-        let rest = bytes
-            .strip_prefix(MAGIC)
-            .ok_or_else(|| bad("magic", "not a neural-field checkpoint".into()))?;
-        if rest.len() < 8 {
-            return Err(bad("header", "file ends inside the header length".into()));
-        }
-        let hl = u64::from_le_bytes(rest[..8].try_into().expect("8 bytes"));
-        let rest = &rest[8..];
-        let hl = usize::try_from(hl)
-            .ok()
-            .filter(|&l| l <= rest.len())
-            .ok_or_else(|| bad("header", format!("length {hl} exceeds the file")))?;
-        let h: Header = serde_json::from_slice(&rest[..hl])
-            .map_err(|e| bad("header", format!("not valid JSON: {e}")))?;
+        let (h, rest): (Header, _) =
+            fsio::read_frame(path, bytes, MAGIC, "a neural-field checkpoint")?;
         if h.format_version != VERSION {
             return Err(bad(
                 "format_version",
@@ -155,7 +140,6 @@ impl FieldCheckpoint {
                 format!("{} is not a time", h.train_time_s),
             ));
         }
-        let rest = &rest[hl..];
         let need = n_params
             .checked_mul(12)
             .and_then(|b| b.checked_add(h.log_bytes))

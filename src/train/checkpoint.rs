@@ -112,12 +112,8 @@ impl Checkpoint {
             log_bytes: self.log.len(),
             compaction: self.compaction.clone(),
         };
-        let hj = serde_json::to_vec(&h).expect("checkpoint header serialises");
-        let mut buf =
-            Vec::with_capacity(CKPT_MAGIC.len() + 8 + hj.len() + self.log.len() + n * 340);
-        buf.extend_from_slice(CKPT_MAGIC);
-        buf.extend_from_slice(&(hj.len() as u64).to_le_bytes());
-        buf.extend_from_slice(&hj);
+        let mut buf = crate::fsio::frame_header(CKPT_MAGIC, &h);
+        buf.reserve(self.log.len() + n * 340);
         buf.extend_from_slice(self.log.as_bytes());
         put_g(&mut buf, &self.state.params);
         put_g(&mut buf, &self.state.adam.m);
@@ -139,27 +135,14 @@ impl Checkpoint {
     /// anything is allocated. Errors name `path` and the field.
     pub fn from_bytes(path: &Path, bytes: &[u8]) -> Result<Self> {
         let bad = |field: &str, msg: String| Error::format(path, field, msg);
-        let rest = bytes
-            .strip_prefix(CKPT_MAGIC)
-            .ok_or_else(|| bad("magic", "not a unispine checkpoint".into()))?;
-        if rest.len() < 8 {
-            return Err(bad("header", "file ends inside the header length".into()));
-        }
-        let hl = u64::from_le_bytes(rest[..8].try_into().unwrap());
-        let rest = &rest[8..];
-        let hl = usize::try_from(hl)
-            .ok()
-            .filter(|&l| l <= rest.len())
-            .ok_or_else(|| bad("header", format!("length {hl} exceeds the file")))?;
-        let h: CkptHeader = serde_json::from_slice(&rest[..hl])
-            .map_err(|e| bad("header", format!("not valid JSON: {e}")))?;
+        let (h, rest): (CkptHeader, _) =
+            crate::fsio::read_frame(path, bytes, CKPT_MAGIC, "a unispine checkpoint")?;
         if h.format_version != CKPT_VERSION {
             return Err(bad(
                 "format_version",
                 format!("{} (this build reads {CKPT_VERSION})", h.format_version),
             ));
         }
-        let rest = &rest[hl..];
         let n = h.n_gaussians;
         let need = n
             .checked_mul(3 * PER_G * 4 + 8 + 4 + 4)
