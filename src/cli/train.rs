@@ -349,8 +349,8 @@ fn resume_field(run: &Path, args: &TrainArgs) -> anyhow::Result<()> {
     )
 }
 
-/// Load the dataset, print `headline`, run `go` with a progress bar, report (a stopped field run exits 130 /
-/// 143 after naming its checkpoint).
+/// Load the dataset, print `headline`, run `go` with a progress bar, report (a stopped
+/// field run exits 130 / 143 after naming its checkpoint).
 fn drive_baseline(
     headline: &str,
     data: &Path,
