@@ -16,7 +16,7 @@ use crate::field::{Field, FieldConfig};
 use crate::fsio;
 use crate::image2d::Image2d;
 use crate::train::run_dir::CHECKPOINT;
-use crate::train::{EvalPoint, Event, Metrics, RunDir};
+use crate::train::{EvalPoint, Event, IterRate, Metrics, RunDir};
 
 /// Continue the stopped field run in `dir` (its `config.json` and `checkpoint.bin`) on `ds`,
 /// with the same bits as a run that never stopped; writes the run folder as [`run`] does.
@@ -89,7 +89,7 @@ pub fn run_field(
     };
     let t0 = Instant::now();
     let elapsed = || before + t0.elapsed().as_secs_f64();
-    let (mut win_t, mut win_it, mut its) = (Instant::now(), 0usize, 0.0f64);
+    let mut rate = IterRate::default();
     let mut completed = true;
     while tr.iteration < total {
         if stop.load(Ordering::SeqCst) || stop_after.is_some_and(|k| tr.iteration >= k) {
@@ -105,15 +105,7 @@ pub fn run_field(
             "{},{},{:.9e},{:.9e},0,{:.6},0,{:.3}",
             s.iteration, s.view, s.loss, s.loss, psnr, t
         );
-        win_it += 1;
-        let dt = win_t.elapsed().as_secs_f64();
-        if dt >= 1.0 || its == 0.0 {
-            its = win_it as f64 / dt.max(1e-9);
-            if dt >= 1.0 {
-                win_t = Instant::now();
-                win_it = 0;
-            }
-        }
+        let its = rate.tick();
         on_event(&Event::Progress {
             iteration: s.iteration,
             total,

@@ -158,23 +158,20 @@ impl FieldCheckpoint {
         let log = std::str::from_utf8(&rest[..h.log_bytes])
             .map_err(|_| bad("log", "not UTF-8".into()))?
             .to_string();
-        let arrays: Vec<Vec<f32>> = rest[h.log_bytes..]
-            .chunks_exact(4 * n_params.max(1))
-            .take(if n_params == 0 { 0 } else { 3 })
-            .map(|c| {
-                c.chunks_exact(4)
-                    .map(|v| f32::from_le_bytes(v.try_into().expect("4 bytes")))
-                    .collect()
-            })
-            .collect();
-        let get = |k: usize| arrays.get(k).cloned().unwrap_or_default();
+        // Array k (parameters, m, v) of n_params little-endian f32 after the log.
+        let array = |k: usize| -> Vec<f32> {
+            rest[h.log_bytes + 4 * n_params * k..h.log_bytes + 4 * n_params * (k + 1)]
+                .chunks_exact(4)
+                .map(|v| f32::from_le_bytes(v.try_into().expect("4 bytes")))
+                .collect()
+        };
         let c = FieldCheckpoint {
             iteration: h.iteration,
             train_time_s: h.train_time_s,
             log,
-            params: get(0),
-            adam_m: get(1),
-            adam_v: get(2),
+            params: array(0),
+            adam_m: array(1),
+            adam_v: array(2),
             adam_step: h.adam_step,
         };
         for (name, a) in [

@@ -39,3 +39,38 @@ pub enum Event {
     /// The run stopped on request (Ctrl-C) after this iteration.
     Stopped { iteration: usize },
 }
+
+/// The iterations-per-second figure of [`Event::Progress`]: iterations counted over windows of
+/// about one second (the first iteration reports at once, from its own time).
+#[derive(Debug)]
+pub struct IterRate {
+    window_start: std::time::Instant,
+    in_window: usize,
+    rate: f64,
+}
+
+impl Default for IterRate {
+    fn default() -> Self {
+        IterRate {
+            window_start: std::time::Instant::now(),
+            in_window: 0,
+            rate: 0.0,
+        }
+    }
+}
+
+impl IterRate {
+    /// Count one iteration; returns the current rate.
+    pub fn tick(&mut self) -> f64 {
+        self.in_window += 1;
+        let dt = self.window_start.elapsed().as_secs_f64();
+        if dt >= 1.0 || self.rate == 0.0 {
+            self.rate = self.in_window as f64 / dt.max(1e-9);
+            if dt >= 1.0 {
+                self.window_start = std::time::Instant::now();
+                self.in_window = 0;
+            }
+        }
+        self.rate
+    }
+}

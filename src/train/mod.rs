@@ -61,7 +61,7 @@ use crate::optim::{Group, N_GROUPS};
 use crate::render::{self, RenderSettings};
 
 pub use config::{Method, TrainConfig};
-pub use event::Event;
+pub use event::{Event, IterRate};
 pub use run_dir::{Checkpoint, EvalPoint, Metrics, RunDir};
 pub use session::{resume, run, run_with, Control};
 pub use settings::TrainOverrides;

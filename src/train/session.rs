@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use super::run_dir::{Checkpoint, EvalPoint, Metrics, RunDir, LOG_HEADER};
-use super::{Event, TrainConfig, Trainer};
+use super::{Event, IterRate, TrainConfig, Trainer};
 use crate::dataset::Dataset;
 use crate::error::Result;
 use crate::eval;
@@ -149,8 +149,7 @@ fn drive(
     let t0 = Instant::now();
     let before = s.time_before_s;
     let elapsed = || before + t0.elapsed().as_secs_f64();
-    let (mut win_t, mut win_it) = (Instant::now(), 0usize);
-    let mut its_per_sec = 0.0;
+    let mut rate = IterRate::default();
     let mut completed = true;
     let total = cfg.total_iterations();
     while s.tr.iteration < total {
@@ -204,15 +203,7 @@ fn drive(
             info.n_gaussians,
             elapsed()
         );
-        win_it += 1;
-        let dt = win_t.elapsed().as_secs_f64();
-        if dt >= 1.0 || its_per_sec == 0.0 {
-            its_per_sec = win_it as f64 / dt.max(1e-9);
-            if dt >= 1.0 {
-                win_t = Instant::now();
-                win_it = 0;
-            }
-        }
+        let its_per_sec = rate.tick();
         on_event(&Event::Progress {
             iteration: it,
             total,
