@@ -6,17 +6,16 @@ use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use super::{score_line_integrals, views_fps, write_run, Outcome};
+use super::{baseline_metrics, score_line_integrals, views_fps, write_run, Outcome};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
-use crate::eval;
 use crate::field::checkpoint::FieldCheckpoint;
 use crate::field::train::FieldTrainer;
 use crate::field::{Field, FieldConfig};
 use crate::fsio;
 use crate::image2d::Image2d;
 use crate::train::run_dir::CHECKPOINT;
-use crate::train::{EvalPoint, Event, IterRate, Metrics, RunDir};
+use crate::train::{Event, IterRate, Metrics, RunDir};
 
 /// Continue the stopped field run in `dir` (its `config.json` and `checkpoint.bin`) on `ds`,
 /// with the same bits as a run that never stopped; writes the run folder as [`run`] does.
@@ -146,39 +145,20 @@ pub fn run_field(
         );
     }
     let cfg = tr.cfg.clone();
-    let params = tr.field.params.len() as u64;
-    let metrics = Metrics {
-        method: cfg.label(),
-        iterations: tr.iteration,
-        completed,
-        evals: ev
-            .iter()
-            .map(|e| EvalPoint {
-                iteration: tr.iteration,
-                psnr: e.psnr,
-                ssim: e.ssim,
-                n_gaussians: 0,
-            })
-            .collect(),
-        test_psnr: ev.as_ref().map(|e| e.psnr),
-        test_ssim: ev.as_ref().map(|e| e.ssim),
-        train_time_s: train_time,
-        eval_time_s: eval_time,
-        render_fps: fps,
-        render_fps_protocol: format!(
-            "the first {} evaluated test views rendered in full ({} samples per ray), f32, one \
-             warm-up render, median of 3 timed passes",
-            views.len().min(FIELD_FPS_VIEWS),
-            cfg.n_samples
-        ),
-        n_gaussians: 0,
-        peak_memory_bytes: eval::peak_memory_bytes(),
-        extent: 0.0,
-        render: Default::default(),
-        threads: rayon::current_num_threads(),
-        compaction: None,
-        model_bytes: Some(params * 4),
-    };
+    let protocol = format!(
+        "the first {} evaluated test views rendered in full ({} samples per ray), f32, one \
+         warm-up render, median of 3 timed passes",
+        views.len().min(FIELD_FPS_VIEWS),
+        cfg.n_samples
+    );
+    let metrics = baseline_metrics(
+        cfg.label(),
+        tr.iteration,
+        ev.as_ref(),
+        (train_time, eval_time),
+        (fps, protocol),
+        tr.field.params.len(),
+    );
     let config = field_config_json(&cfg, &views);
     let field = tr.field;
     Ok((

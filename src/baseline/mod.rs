@@ -251,6 +251,47 @@ fn project_views(proj: &Projector<'_, f32>, angles: &[f64]) -> Result<Vec<Image2
     angles.iter().map(|&a| proj.view(a)).collect()
 }
 
+/// `metrics.json` of a baseline run after `iterations`: `ev` is the test score of the final
+/// model (absent when the run stopped early, which makes it incomplete); no Gaussians; the
+/// model is `n_params` f32 values.
+pub(crate) fn baseline_metrics(
+    method: String,
+    iterations: usize,
+    ev: Option<&EvalResult>,
+    (train_time_s, eval_time_s): (f64, f64),
+    (render_fps, render_fps_protocol): (Option<f64>, String),
+    n_params: usize,
+) -> Metrics {
+    Metrics {
+        method,
+        iterations,
+        completed: ev.is_some(),
+        evals: ev
+            .iter()
+            .map(|e| EvalPoint {
+                iteration: iterations,
+                psnr: e.psnr,
+                ssim: e.ssim,
+                n_gaussians: 0,
+            })
+            .collect(),
+        test_psnr: ev.map(|e| e.psnr),
+        test_ssim: ev.map(|e| e.ssim),
+        train_time_s,
+        eval_time_s,
+        render_fps,
+        render_fps_protocol,
+        n_gaussians: 0,
+        peak_memory_bytes: eval::peak_memory_bytes(),
+        extent: 0.0,
+        render: Default::default(),
+        threads: rayon::current_num_threads(),
+        compaction: None,
+        model_bytes: Some(n_params as u64 * 4),
+    }
+}
+
+/// FDK from the training views, re-projected with our DRR and scored at the test views.
 pub fn run_fdk(ds: &Dataset) -> Result<(Outcome, Volume<f32>)> {
     crate::dataset::store::check(ds)?;
     let t0 = Instant::now();
@@ -268,35 +309,19 @@ pub fn run_fdk(ds: &Dataset) -> Result<(Outcome, Volume<f32>)> {
         std::hint::black_box(proj.view(ds.test.angles[k])?);
         Ok(())
     })?;
-    let params = vol.data.len() as u64;
-    let metrics = Metrics {
-        method: Baseline::Fdk.name().into(),
-        iterations: 1,
-        completed: true,
-        evals: vec![EvalPoint {
-            iteration: 1,
-            psnr: ev.psnr,
-            ssim: ev.ssim,
-            n_gaussians: 0,
-        }],
-        test_psnr: Some(ev.psnr),
-        test_ssim: Some(ev.ssim),
-        train_time_s: train_time,
-        eval_time_s: eval_time,
-        render_fps: Some(fps),
-        render_fps_protocol: format!(
-            "test views, forward only ({} DRR of the reconstructed volume), f32, one warm-up \
-             render, median of 3 timed passes",
-            ds.manifest.projector
-        ),
-        n_gaussians: 0,
-        peak_memory_bytes: eval::peak_memory_bytes(),
-        extent: 0.0,
-        render: Default::default(),
-        threads: rayon::current_num_threads(),
-        compaction: None,
-        model_bytes: Some(params * 4),
-    };
+    let protocol = format!(
+        "test views, forward only ({} DRR of the reconstructed volume), f32, one warm-up \
+         render, median of 3 timed passes",
+        ds.manifest.projector
+    );
+    let metrics = baseline_metrics(
+        Baseline::Fdk.name().into(),
+        1,
+        Some(&ev),
+        (train_time, eval_time),
+        (Some(fps), protocol),
+        vol.data.len(),
+    );
     let config = serde_json::json!({
         "method": "fdk",
         "algorithm": "FDK, TIGRE Python semantics: cosine weighting, Ram-Lak (ramp_flat, scale (DSD/DSO)(2 pi/N)/(4 du)), voxel-driven backprojection weighted by 1/U^2, no Parker",
