@@ -10,7 +10,9 @@ use super::super::tiles::TILE;
 use super::super::SplatGrads;
 use super::dispatch::{self, Kernel};
 use super::worklist::{pack, tile_entries, Entry, Packed};
-use super::{CompositeSaved, KernelWork, Phase, Splats, ALPHA_MAX, ALPHA_MIN, TP};
+use super::{
+    fixed, CompositeSaved, KernelWork, Phase, Splats, ALPHA_MAX, ALPHA_MIN, HALF_MASKS, TP,
+};
 use crate::image2d::Image2d;
 use crate::real::Real;
 use crate::simd::Simd;
@@ -35,11 +37,13 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
     let bins = &saved.bins;
     let width = bins.width;
     let [x0, x1, y0, y1] = bins.pixel_rect(t);
-    let mut tcur = [R::zero(); TP];
-    let mut tfin = [R::zero(); TP];
-    let mut behind = [R::zero(); TP];
-    let mut g = [R::zero(); TP];
-    let mut last = [0u32; TP];
+    let mut px = Pixels {
+        tcur: [R::zero(); TP],
+        tfin: [R::zero(); TP],
+        behind: [R::zero(); TP],
+        g: [R::zero(); TP],
+        last: [0u32; TP],
+    };
     let mut max_last = 0u32;
     // Largest n_contrib per tile row: rows with nothing left to visit are skipped.
     let mut row_last = [0u32; TILE];
@@ -47,11 +51,11 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
         for col in x0..x1 {
             let p = (row - y0) * TILE + col - x0;
             let q = row * width + col;
-            tcur[p] = saved.final_t[q];
-            tfin[p] = saved.final_t[q];
-            g[p] = d_image.data[q];
-            last[p] = saved.n_contrib[q];
-            row_last[row - y0] = row_last[row - y0].max(last[p]);
+            px.tcur[p] = saved.final_t[q];
+            px.tfin[p] = saved.final_t[q];
+            px.g[p] = d_image.data[q];
+            px.last[p] = saved.n_contrib[q];
+            row_last[row - y0] = row_last[row - y0].max(px.last[p]);
         }
         max_last = max_last.max(row_last[row - y0]);
     }
@@ -65,8 +69,6 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
         built = tile_entries(packed, bins, t);
         &built
     };
-    let (amax, amin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN));
-    let one = R::one();
     let zero = R::zero();
     let half = R::c(0.5);
     let bg = saved.background;
@@ -81,71 +83,47 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
         let ju = j as u32;
         let (k0, k1) = (e.x0 as usize - x0, e.x1 as usize - x0);
         let colm: [u32; TILE] = std::array::from_fn(|k| mask(k0 <= k && k < k1));
-        let mut any = 0u32;
         stats.entries += 1;
         for l in lanes.iter_mut() {
             *l = [zero; TILE];
         }
+        // The lane vectors this entry visits, per column block `v` (rows ascending): rows with
+        // a pixel where the entry may still blend (`j < n_contrib`) and a half the chord meets.
+        let mut steps = [[0u8; TILE]; 2];
+        let mut n_steps = [0usize; 2];
         for row in e.y0 as usize..e.y1 as usize {
             if ju >= row_last[row - y0] {
                 continue;
             }
             stats.rows += 1;
-            let dy = R::c(row as f64) + half - e.my;
-            let base = (row - y0) * TILE;
-            let r2 = 2 * (row - y0);
-            let hv = [e.halves >> r2 & 1 != 0, e.halves >> (r2 + 1) & 1 != 0];
             for v in 0..TILE / W {
-                let (c0, h0) = (v * W, v * W / 8);
-                if !hv[h0..h0 + W / 8].iter().any(|&h| h) {
-                    continue;
+                if vector_mask::<W>(e.halves, row - y0, v * W) != 0 {
+                    steps[v][n_steps[v]] = (row - y0) as u8;
+                    n_steps[v] += 1;
                 }
-                stats.lanes += W as u64;
-                let act: [u32; W] = if W == 8 {
-                    colm[c0..c0 + W].try_into().unwrap()
-                } else {
-                    std::array::from_fn(|k| colm[c0 + k] & mask(hv[(c0 + k) / 8]))
-                };
-                let r = base + c0..base + c0 + W;
-                let tc: &mut [R; W] = (&mut tcur[r.clone()]).try_into().unwrap();
-                let tf: &[R; W] = (&tfin[r.clone()]).try_into().unwrap();
-                let bh: &mut [R; W] = (&mut behind[r.clone()]).try_into().unwrap();
-                let gr: &[R; W] = (&g[r.clone()]).try_into().unwrap();
-                let lr: &[u32; W] = (&last[r]).try_into().unwrap();
-                let xh: &[R; W] = xs[c0..c0 + W].try_into().unwrap();
-                let [l0, l1, l2, l3, l4, l5, l6] = &mut lanes;
-                let l0: &mut [R; W] = (&mut l0[c0..c0 + W]).try_into().unwrap();
-                let l1: &mut [R; W] = (&mut l1[c0..c0 + W]).try_into().unwrap();
-                let l2: &mut [R; W] = (&mut l2[c0..c0 + W]).try_into().unwrap();
-                let l3: &mut [R; W] = (&mut l3[c0..c0 + W]).try_into().unwrap();
-                let l4: &mut [R; W] = (&mut l4[c0..c0 + W]).try_into().unwrap();
-                let l5: &mut [R; W] = (&mut l5[c0..c0 + W]).try_into().unwrap();
-                let l6: &mut [R; W] = (&mut l6[c0..c0 + W]).try_into().unwrap();
-                for k in 0..W {
-                    let dx = xh[k] - e.mx;
-                    let pw = power_of(e.a, e.b, e.c, dx, dy);
-                    let gk = exp_k(pw);
-                    let og = e.o * gk;
-                    let alpha = sel(mask(og > amax), amax, og);
-                    let valid = act[k] & mask(ju < lr[k]) & mask(pw <= zero) & mask(alpha >= amin);
-                    let inv = one / (one - alpha);
-                    let tk = tc[k] * inv;
-                    let gp = gr[k];
-                    let d_alpha = gp * (e.col * tk - bh[k] * inv) - gp * bg * tf[k] * inv;
-                    bh[k] = sel(valid, bh[k] + e.col * alpha * tk, bh[k]);
-                    tc[k] = sel(valid, tk, tc[k]);
-                    l6[k] = sel(valid, l6[k] + gp * alpha * tk, l6[k]);
-                    // Clamp active (o G > 0.99): d alpha / d (o G) = 0.
-                    let live = valid & mask(og <= amax);
-                    let d_pw = og * d_alpha;
-                    l5[k] = sel(live, l5[k] + gk * d_alpha, l5[k]);
-                    l0[k] = sel(live, l0[k] + d_pw * (e.a * dx + e.b * dy), l0[k]);
-                    l1[k] = sel(live, l1[k] + d_pw * (e.b * dx + e.c * dy), l1[k]);
-                    l2[k] = sel(live, l2[k] - half * dx * dx * d_pw, l2[k]);
-                    l3[k] = sel(live, l3[k] - dx * dy * d_pw, l3[k]);
-                    l4[k] = sel(live, l4[k] - half * dy * dy * d_pw, l4[k]);
-                    any |= valid;
-                }
+            }
+        }
+        // Two rows per step (independent dependency chains side by side); per column the rows
+        // still add in ascending order, so the bits are those of one row at a time.
+        let mut any = 0u32;
+        for v in 0..TILE / W {
+            let rows = &steps[v][..n_steps[v]];
+            stats.lanes += (W * rows.len()) as u64;
+            for pr in rows.chunks(2) {
+                let (r, two) = ([pr[0] as usize, pr[pr.len() - 1] as usize], pr.len() == 2);
+                any |= rows_step::<R, W>(
+                    e,
+                    ju,
+                    bg,
+                    &colm,
+                    &xs,
+                    y0,
+                    v * W,
+                    r,
+                    two,
+                    &mut px,
+                    &mut lanes,
+                );
             }
         }
         if any > 0 {
@@ -159,6 +137,196 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
         }
     }
     (recs, stats)
+}
+
+/// Per-pixel state of the backward kernel, tile-local: T recovered so far, the final T, the
+/// colour behind (S), dL/dpixel and n_contrib.
+struct Pixels<R> {
+    tcur: [R; TP],
+    tfin: [R; TP],
+    behind: [R; TP],
+    g: [R; TP],
+    last: [u32; TP],
+}
+
+/// Lanes of the `W` columns from `c0` of tile row `r` that a chord-tested half may hold
+/// (all-ones per lane).
+#[inline(always)]
+fn vector_mask<const W: usize>(halves: u32, r: usize, c0: usize) -> u32 {
+    let h = (halves >> (2 * r)) & 3;
+    if W == 16 {
+        h
+    } else {
+        h >> (c0 / 8) & 1
+    }
+}
+
+/// One pixel's part of the backward of one entry: whether it blended there (`valid`) and
+/// whether its clamp is inactive (`live`), the seven gradient terms (mean x, mean y, A, B, C,
+/// opacity, colour; A, B and C are subtracted), with the pixel's T and colour-behind updated.
+struct Lane<R> {
+    valid: u32,
+    live: u32,
+    d: [R; 7],
+}
+
+/// One tile row's `W` pixels from column `c0` as the backward of one entry sees them: the
+/// row offset `dy`, the lanes (the entry's columns within the halves its chord meets),
+/// n_contrib, dL/dpixel, final T, and the T and colour-behind it updates (local copies, so
+/// that nothing aliases in the lane loop).
+struct Row<R, const W: usize> {
+    o: usize,
+    dy: R,
+    act: [u32; W],
+    last: [u32; W],
+    g: [R; W],
+    tfin: [R; W],
+    tcur: [R; W],
+    behind: [R; W],
+}
+
+impl<R: Real, const W: usize> Row<R, W> {
+    #[inline(always)]
+    fn load(
+        px: &Pixels<R>,
+        e: &Entry<R>,
+        colm: &[u32; TILE],
+        y0: usize,
+        r: usize,
+        c0: usize,
+    ) -> Self {
+        let o = r * TILE + c0;
+        let cm: &[u32; W] = fixed(colm, c0);
+        let hm: &[u32; W] = fixed(&HALF_MASKS[(e.halves >> (2 * r) & 3) as usize], c0);
+        let mut act = [0u32; W];
+        for k in 0..W {
+            act[k] = cm[k] & hm[k];
+        }
+        Row {
+            o,
+            dy: R::c((y0 + r) as f64) + R::c(0.5) - e.my,
+            act,
+            last: *fixed(&px.last, o),
+            g: *fixed(&px.g, o),
+            tfin: *fixed(&px.tfin, o),
+            tcur: *fixed(&px.tcur, o),
+            behind: *fixed(&px.behind, o),
+        }
+    }
+
+    #[inline(always)]
+    fn store(&self, px: &mut Pixels<R>) {
+        px.tcur[self.o..self.o + W].copy_from_slice(&self.tcur);
+        px.behind[self.o..self.o + W].copy_from_slice(&self.behind);
+    }
+}
+
+/// The backward of entry `e` (list position `ju`) at pixel `k` of `row` (offset `dx`),
+/// updating its T and colour behind where the entry blended.
+#[inline(always)]
+fn lane<R: Real, const W: usize>(
+    e: &Entry<R>,
+    ju: u32,
+    bg: R,
+    dx: R,
+    row: &mut Row<R, W>,
+    k: usize,
+) -> Lane<R> {
+    let (amax, amin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN));
+    let (one, zero, half) = (R::one(), R::zero(), R::c(0.5));
+    let dy = row.dy;
+    let (gp, tc, bh) = (row.g[k], row.tcur[k], row.behind[k]);
+    let pw = power_of(e.a, e.b, e.c, dx, dy);
+    let gk = exp_k(pw);
+    let og = e.o * gk;
+    let alpha = sel(mask(og > amax), amax, og);
+    let valid = row.act[k] & mask(ju < row.last[k]) & mask(pw <= zero) & mask(alpha >= amin);
+    let inv = one / (one - alpha);
+    let tk = tc * inv;
+    let d_alpha = gp * (e.col * tk - bh * inv) - gp * bg * row.tfin[k] * inv;
+    row.behind[k] = sel(valid, bh + e.col * alpha * tk, bh);
+    row.tcur[k] = sel(valid, tk, tc);
+    // Clamp active (o G > 0.99): d alpha / d (o G) = 0.
+    let live = valid & mask(og <= amax);
+    let d_pw = og * d_alpha;
+    Lane {
+        valid,
+        live,
+        d: [
+            d_pw * (e.a * dx + e.b * dy),
+            d_pw * (e.b * dx + e.c * dy),
+            half * dx * dx * d_pw,
+            dx * dy * d_pw,
+            half * dy * dy * d_pw,
+            gk * d_alpha,
+            gp * alpha * tk,
+        ],
+    }
+}
+
+/// Adds one pixel's terms ([`Lane`]) to the column sums `acc[.][k]` where it counts.
+#[inline(always)]
+fn add_lane<R: Real, const W: usize>(acc: &mut [[R; W]; 7], k: usize, l: &Lane<R>) {
+    for m in [0, 1, 5] {
+        acc[m][k] = sel(l.live, acc[m][k] + l.d[m], acc[m][k]);
+    }
+    for m in [2, 3, 4] {
+        acc[m][k] = sel(l.live, acc[m][k] - l.d[m], acc[m][k]);
+    }
+    acc[6][k] = sel(l.valid, acc[6][k] + l.d[6], acc[6][k]);
+}
+
+/// The backward of entry `e` (list position `ju`) at the `W` pixels from column `c0` of tile
+/// rows `rows[0]` and, if `two`, `rows[1]` (> `rows[0]`), in one lane loop so that the two
+/// rows' dependency chains run side by side; returns the lanes (OR-ed) where the entry blended.
+/// Per pixel and per column sum, the operations are those of one row at a time in ascending
+/// order, so the bits do not depend on the pairing.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn rows_step<R: Real, const W: usize>(
+    e: &Entry<R>,
+    ju: u32,
+    bg: R,
+    colm: &[u32; TILE],
+    xs: &[R; TILE],
+    y0: usize,
+    c0: usize,
+    rows: [usize; 2],
+    two: bool,
+    px: &mut Pixels<R>,
+    lanes: &mut [[R; TILE]; 7],
+) -> u32 {
+    let xh: &[R; W] = fixed(xs, c0);
+    let mut a = Row::<R, W>::load(px, e, colm, y0, rows[0], c0);
+    let mut acc: [[R; W]; 7] = [R::zero(); 7].map(|_| [R::zero(); W]);
+    for m in 0..7 {
+        acc[m] = *fixed(&lanes[m], c0);
+    }
+    let mut any = 0u32;
+    if two {
+        let mut b = Row::<R, W>::load(px, e, colm, y0, rows[1], c0);
+        for (k, &x) in xh.iter().enumerate() {
+            let dx = x - e.mx;
+            let la = lane(e, ju, bg, dx, &mut a, k);
+            let lb = lane(e, ju, bg, dx, &mut b, k);
+            add_lane(&mut acc, k, &la);
+            add_lane(&mut acc, k, &lb);
+            any |= la.valid | lb.valid;
+        }
+        b.store(px);
+    } else {
+        for (k, &x) in xh.iter().enumerate() {
+            let dx = x - e.mx;
+            let la = lane(e, ju, bg, dx, &mut a, k);
+            add_lane(&mut acc, k, &la);
+            any |= la.valid;
+        }
+    }
+    a.store(px);
+    for m in 0..7 {
+        lanes[m][c0..c0 + W].copy_from_slice(&acc[m]);
+    }
+    any
 }
 
 /// Vector-Jacobian product of [`forward`](fn@super::forward): the gradient of sum(d_image * image)
