@@ -13,7 +13,7 @@ use std::process::Command;
 use unispine::audit::{self, field as fc};
 use unispine::field::encode::{DenseGrid, Encoder, GridMap, HashGrid, TensorVm, VmLines};
 use unispine::field::mlp::OutAct;
-use unispine::field::train::loss_and_grad;
+use unispine::field::train::{loss_and_grad, Sampling};
 use unispine::field::{EncoderConfig, Field, FieldConfig};
 use unispine::simd::Simd;
 
@@ -392,10 +392,7 @@ fn encoders_are_bit_identical_for_1_2_8_threads() {
                     &f,
                     &rays,
                     &targets,
-                    (0.7, 1.3),
-                    cfg.n_samples,
-                    0.3,
-                    &fc::test_jitter,
+                    &Sampling::new((0.7, 1.3), cfg.n_samples, 0.3, &fc::test_jitter),
                 )
             });
             let mut ge = vec![0.0f32; ne];

@@ -9,7 +9,7 @@ use rand_chacha::ChaCha8Rng;
 use unispine::field::adam::FlatAdam;
 use unispine::field::gemm;
 use unispine::field::render::{self, Ray};
-use unispine::field::train::{loss_and_grad, Workspace};
+use unispine::field::train::{loss_and_grad, Sampling, Workspace};
 use unispine::field::{Field, FieldConfig};
 use unispine::simd::Simd;
 
@@ -263,11 +263,22 @@ fn train_bits(cfg: &FieldConfig, simd: Simd, iters: usize) -> Vec<u32> {
     for it in 0..iters {
         let (rays, t) = batch(it, [37, 64, 13][it % 3]);
         let jitter = |i: usize| render::ray_rng(0, 2, it as u64, i as u64);
-        let loss = ws.loss_and_grad(simd, &f, &rays, &t, (0.7, 1.3), cfg.n_samples, 0.3, &jitter);
+        let loss = ws.loss_and_grad(
+            simd,
+            &f,
+            &rays,
+            &t,
+            &Sampling::new((0.7, 1.3), cfg.n_samples, 0.3, &jitter),
+        );
         assert!(loss.is_finite() && loss > 0.0);
         // A fresh workspace gives the same gradient as the reused one.
         if simd == Simd::active() {
-            let (l2, g2) = loss_and_grad(&f, &rays, &t, (0.7, 1.3), cfg.n_samples, 0.3, &jitter);
+            let (l2, g2) = loss_and_grad(
+                &f,
+                &rays,
+                &t,
+                &Sampling::new((0.7, 1.3), cfg.n_samples, 0.3, &jitter),
+            );
             assert_eq!(loss.to_bits(), l2.to_bits());
             assert!(ws
                 .grad

@@ -7,7 +7,7 @@ use rand_chacha::ChaCha8Rng;
 use unispine::field::encode::{Encoder, Frequency, HashGrid};
 use unispine::field::mlp::{Mlp, OutAct};
 use unispine::field::render::{self, Ray};
-use unispine::field::train::loss_and_grad;
+use unispine::field::train::{loss_and_grad, Sampling};
 use unispine::field::{EncoderConfig, Field, FieldConfig};
 
 /// Relative error of a parameter group: `|analytic - fd| / |fd|` (2-norms over the group).
@@ -199,7 +199,12 @@ fn field_loss_matches_central_differences() {
             let r = rays();
             let targets: Vec<f64> = (0..r.len()).map(|i| 0.05 + 0.02 * i as f64).collect();
             let nf = (0.7, 1.3);
-            let (_, g) = loss_and_grad(&f, &r, &targets, nf, cfg.n_samples, 0.3, &jitter);
+            let (_, g) = loss_and_grad(
+                &f,
+                &r,
+                &targets,
+                &Sampling::new(nf, cfg.n_samples, 0.3, &jitter),
+            );
             let h = 1e-6;
             let (mut genc, mut gmlp) = (Group::default(), Group::default());
             let mut nonzero = 0;
@@ -211,8 +216,20 @@ fn field_loss_matches_central_differences() {
                 a.params[i] += h;
                 let mut b = f.clone();
                 b.params[i] -= h;
-                let la = loss_and_grad(&a, &r, &targets, nf, cfg.n_samples, 0.3, &jitter).0;
-                let lb = loss_and_grad(&b, &r, &targets, nf, cfg.n_samples, 0.3, &jitter).0;
+                let la = loss_and_grad(
+                    &a,
+                    &r,
+                    &targets,
+                    &Sampling::new(nf, cfg.n_samples, 0.3, &jitter),
+                )
+                .0;
+                let lb = loss_and_grad(
+                    &b,
+                    &r,
+                    &targets,
+                    &Sampling::new(nf, cfg.n_samples, 0.3, &jitter),
+                )
+                .0;
                 let fd = (la - lb) / (2.0 * h);
                 if i < ne {
                     genc.add(gi, fd);
@@ -277,7 +294,14 @@ fn gradients_are_bit_identical_for_1_2_8_threads() {
             .num_threads(t)
             .build()
             .unwrap();
-        let (l, g) = pool.install(|| loss_and_grad(&f, &r, &targets, (0.7, 1.3), 6, 0.3, &jitter));
+        let (l, g) = pool.install(|| {
+            loss_and_grad(
+                &f,
+                &r,
+                &targets,
+                &Sampling::new((0.7, 1.3), 6, 0.3, &jitter),
+            )
+        });
         out.push((
             l.to_bits(),
             g.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),

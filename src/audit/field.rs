@@ -23,7 +23,7 @@ use crate::audit::Row;
 use crate::field::encode::{DenseGrid, Encoder, Frequency, GridMap, HashGrid, TensorVm, VmLines};
 use crate::field::mlp::{Mlp, OutAct};
 use crate::field::render::{self, Ray};
-use crate::field::train::loss_and_grad;
+use crate::field::train::{loss_and_grad, Sampling};
 use crate::field::{EncoderConfig, Field, FieldConfig};
 use crate::math::fd;
 use crate::simd::Simd;
@@ -388,9 +388,20 @@ pub fn loss_rows() -> Vec<Row> {
         let loss = |p: &[f64]| {
             let mut g = f.clone();
             g.params.copy_from_slice(p);
-            loss_and_grad(&g, &rays, &targets, nf, cfg.n_samples, BOUND, &test_jitter).0
+            loss_and_grad(
+                &g,
+                &rays,
+                &targets,
+                &Sampling::new(nf, cfg.n_samples, BOUND, &test_jitter),
+            )
+            .0
         };
-        let (_, an) = loss_and_grad(&f, &rays, &targets, nf, cfg.n_samples, BOUND, &test_jitter);
+        let (_, an) = loss_and_grad(
+            &f,
+            &rays,
+            &targets,
+            &Sampling::new(nf, cfg.n_samples, BOUND, &test_jitter),
+        );
         let ne = f.n_encoder_params();
         let mut parts: Vec<(&'static str, std::ops::Range<usize>)> = vec![];
         if ne > 0 {

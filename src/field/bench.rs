@@ -17,7 +17,7 @@ use rayon::prelude::*;
 use super::adam::FlatAdam;
 use super::mlp::Cache;
 use super::render::{self, Ray};
-use super::train::{cpu_seconds, StageTimes, Workspace, RAYS_PER_BLOCK};
+use super::train::{cpu_seconds, Sampling, StageTimes, Workspace, RAYS_PER_BLOCK};
 use super::{Field, FieldConfig};
 use crate::audit::bench::bench_geometry;
 use crate::error::Result;
@@ -152,10 +152,7 @@ pub fn time_iteration(cfg: &FieldConfig, simd: Simd, iters: usize) -> Result<Ite
                 &field,
                 &rays,
                 &targets,
-                nf,
-                cfg.n_samples,
-                cfg.bound,
-                &jitter,
+                &Sampling::new(nf, cfg.n_samples, cfg.bound, &jitter),
                 (!warm).then_some(&times),
             );
         });

@@ -45,6 +45,33 @@ const RNG_PIXELS: u64 = 1;
 const RNG_TRAIN_JITTER: u64 = 2;
 const RNG_EVAL_JITTER: u64 = 3;
 
+/// How each ray of a batch is sampled: the depth range (t near, t far), the samples per ray,
+/// the half-size of the cube the encoders see, and the seeded generator of ray `i`'s
+/// stratified jitter.
+#[derive(Clone, Copy)]
+pub struct Sampling<'a> {
+    pub near_far: (f64, f64),
+    pub n_samples: usize,
+    pub bound: f64,
+    pub jitter: &'a (dyn Fn(usize) -> ChaCha8Rng + Sync),
+}
+
+impl<'a> Sampling<'a> {
+    pub fn new(
+        near_far: (f64, f64),
+        n_samples: usize,
+        bound: f64,
+        jitter: &'a (dyn Fn(usize) -> ChaCha8Rng + Sync),
+    ) -> Self {
+        Sampling {
+            near_far,
+            n_samples,
+            bound,
+            jitter,
+        }
+    }
+}
+
 /// Forward + backward of a batch of rays with targets. Returns the loss (mean squared error
 /// over the rays) and the gradient of every parameter (a fresh [`Workspace`]; the trainer
 /// reuses one through [`Workspace::loss_and_grad`]).
@@ -52,22 +79,10 @@ pub fn loss_and_grad<R: Real>(
     field: &Field<R>,
     rays: &[Ray],
     targets: &[R],
-    near_far: (f64, f64),
-    n_samples: usize,
-    bound: f64,
-    jitter: &(dyn Fn(usize) -> ChaCha8Rng + Sync),
+    sampling: &Sampling<'_>,
 ) -> (f64, Vec<R>) {
     let mut ws = Workspace::default();
-    let loss = ws.loss_and_grad(
-        Simd::active(),
-        field,
-        rays,
-        targets,
-        near_far,
-        n_samples,
-        bound,
-        jitter,
-    );
+    let loss = ws.loss_and_grad(Simd::active(), field, rays, targets, sampling);
     (loss, ws.grad)
 }
 
@@ -99,38 +114,34 @@ pub struct Workspace<R> {
 impl<R: Real> Workspace<R> {
     /// Loss and gradient (into [`Workspace::grad`]) of a batch, the MLP products on the
     /// instruction set `simd`.
-    #[allow(clippy::too_many_arguments)]
     pub fn loss_and_grad(
         &mut self,
         simd: Simd,
         field: &Field<R>,
         rays: &[Ray],
         targets: &[R],
-        near_far: (f64, f64),
-        n_samples: usize,
-        bound: f64,
-        jitter: &(dyn Fn(usize) -> ChaCha8Rng + Sync),
+        sampling: &Sampling<'_>,
     ) -> f64 {
-        self.run(
-            simd, field, rays, targets, near_far, n_samples, bound, jitter, None,
-        )
+        self.run(simd, field, rays, targets, sampling, None)
     }
 
     /// [`Workspace::loss_and_grad`], adding the seconds of each stage (per thread, summed
     /// over the blocks) to `times` when given.
-    #[allow(clippy::too_many_arguments)]
     pub fn run(
         &mut self,
         simd: Simd,
         field: &Field<R>,
         rays: &[Ray],
         targets: &[R],
-        near_far: (f64, f64),
-        n_samples: usize,
-        bound: f64,
-        jitter: &(dyn Fn(usize) -> ChaCha8Rng + Sync),
+        sampling: &Sampling<'_>,
         times: Option<&Mutex<StageTimes>>,
     ) -> f64 {
+        let Sampling {
+            near_far,
+            n_samples,
+            bound,
+            jitter,
+        } = *sampling;
         let ne = field.n_encoder_params();
         let nm = field.mlp.n_params;
         let ed = field.encoder.out_dim();
@@ -282,15 +293,14 @@ pub fn cpu_seconds(id: libc::clockid_t) -> f64 {
     ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
 }
 
-/// Line integrals (metres x normalised value) along `rays`, jittered by `jitter(ray index)`.
-pub fn render_rays<R: Real>(
-    field: &Field<R>,
-    rays: &[Ray],
-    near_far: (f64, f64),
-    n_samples: usize,
-    bound: f64,
-    jitter: &(dyn Fn(usize) -> ChaCha8Rng + Sync),
-) -> Vec<R> {
+/// Line integrals (metres x normalised value) along `rays`, sampled as `sampling` says.
+pub fn render_rays<R: Real>(field: &Field<R>, rays: &[Ray], sampling: &Sampling<'_>) -> Vec<R> {
+    let Sampling {
+        near_far,
+        n_samples,
+        bound,
+        jitter,
+    } = *sampling;
     rays.par_chunks(RAYS_PER_BLOCK)
         .enumerate()
         .flat_map_iter(|(bi, chunk)| {
@@ -344,10 +354,9 @@ pub fn render_view(
     let acc = render_rays(
         field,
         &rays,
-        render::near_far(geo),
-        cfg.n_samples,
-        cfg.bound,
-        &|i| render::ray_rng(seed, RNG_EVAL_JITTER, view_id, i as u64),
+        &Sampling::new(render::near_far(geo), cfg.n_samples, cfg.bound, &|i| {
+            render::ray_rng(seed, RNG_EVAL_JITTER, view_id, i as u64)
+        }),
     );
     Image2d::from_vec(
         w,
@@ -465,10 +474,9 @@ impl<'a> FieldTrainer<'a> {
             &self.field,
             &rays,
             &targets,
-            self.near_far,
-            self.cfg.n_samples,
-            self.cfg.bound,
-            &|i| render::ray_rng(seed, RNG_TRAIN_JITTER, it as u64, i as u64),
+            &Sampling::new(self.near_far, self.cfg.n_samples, self.cfg.bound, &|i| {
+                render::ray_rng(seed, RNG_TRAIN_JITTER, it as u64, i as u64)
+            }),
         );
         let grad = &self.work.grad;
         let diverged = |what: String| Error::Diverged {
