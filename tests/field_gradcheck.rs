@@ -198,13 +198,8 @@ fn field_loss_matches_central_differences() {
             }
             let r = rays();
             let targets: Vec<f64> = (0..r.len()).map(|i| 0.05 + 0.02 * i as f64).collect();
-            let nf = (0.7, 1.3);
-            let (_, g) = loss_and_grad(
-                &f,
-                &r,
-                &targets,
-                &Sampling::new(nf, cfg.n_samples, 0.3, &jitter),
-            );
+            let sampling = Sampling::new((0.7, 1.3), cfg.n_samples, 0.3, &jitter);
+            let (_, g) = loss_and_grad(&f, &r, &targets, &sampling);
             let h = 1e-6;
             let (mut genc, mut gmlp) = (Group::default(), Group::default());
             let mut nonzero = 0;
@@ -216,20 +211,8 @@ fn field_loss_matches_central_differences() {
                 a.params[i] += h;
                 let mut b = f.clone();
                 b.params[i] -= h;
-                let la = loss_and_grad(
-                    &a,
-                    &r,
-                    &targets,
-                    &Sampling::new(nf, cfg.n_samples, 0.3, &jitter),
-                )
-                .0;
-                let lb = loss_and_grad(
-                    &b,
-                    &r,
-                    &targets,
-                    &Sampling::new(nf, cfg.n_samples, 0.3, &jitter),
-                )
-                .0;
+                let la = loss_and_grad(&a, &r, &targets, &sampling).0;
+                let lb = loss_and_grad(&b, &r, &targets, &sampling).0;
                 let fd = (la - lb) / (2.0 * h);
                 if i < ne {
                     genc.add(gi, fd);

@@ -295,21 +295,16 @@ pub fn cpu_seconds(id: libc::clockid_t) -> f64 {
 
 /// Line integrals (metres x normalised value) along `rays`, sampled as `sampling` says.
 pub fn render_rays<R: Real>(field: &Field<R>, rays: &[Ray], sampling: &Sampling<'_>) -> Vec<R> {
-    let Sampling {
-        near_far,
-        n_samples,
-        bound,
-        jitter,
-    } = *sampling;
+    let (n_samples, (near, far)) = (sampling.n_samples, sampling.near_far);
     rays.par_chunks(RAYS_PER_BLOCK)
         .enumerate()
         .flat_map_iter(|(bi, chunk)| {
             let mut pts = Vec::with_capacity(chunk.len() * n_samples);
             let mut delta = Vec::with_capacity(chunk.len() * n_samples);
             for (j, ray) in chunk.iter().enumerate() {
-                let mut rng = jitter(bi * RAYS_PER_BLOCK + j);
-                let t = render::stratified(near_far.0, near_far.1, n_samples, &mut rng);
-                render::samples(ray, &t, bound, &mut pts, &mut delta);
+                let mut rng = (sampling.jitter)(bi * RAYS_PER_BLOCK + j);
+                let t = render::stratified(near, far, n_samples, &mut rng);
+                render::samples(ray, &t, sampling.bound, &mut pts, &mut delta);
             }
             let mu = field.density(&pts);
             (0..chunk.len())
