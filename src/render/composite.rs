@@ -123,30 +123,6 @@ impl std::ops::AddAssign for KernelWork {
     }
 }
 
-/// Per 2-bit `halves` value of a tile row ([`Entry::halves`]), the lanes of its columns that a
-/// chord-tested half may hold.
-pub(super) const HALF_MASKS: [[u32; TILE]; 4] = {
-    let mut m = [[0u32; TILE]; 4];
-    let mut b = 0;
-    while b < 4 {
-        let mut k = 0;
-        while k < TILE {
-            if (b >> (k / 8)) & 1 != 0 {
-                m[b][k] = u32::MAX;
-            }
-            k += 1;
-        }
-        b += 1;
-    }
-    m
-};
-
-/// `W` values of `v` from `o`.
-#[inline(always)]
-pub(super) fn fixed<T: Copy, const W: usize, const N: usize>(v: &[T; N], o: usize) -> &[T; W] {
-    v[o..o + W].try_into().unwrap()
-}
-
 /// What [`backward`](fn@backward) needs from [`forward`](fn@forward).
 #[derive(Clone, Debug, Default)]
 pub struct CompositeSaved<R: Real> {

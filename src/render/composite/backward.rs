@@ -10,9 +10,7 @@ use super::super::tiles::TILE;
 use super::super::SplatGrads;
 use super::dispatch::{self, Kernel};
 use super::worklist::{pack, tile_entries, Entry, Packed};
-use super::{
-    fixed, CompositeSaved, KernelWork, Phase, Splats, ALPHA_MAX, ALPHA_MIN, HALF_MASKS, TP,
-};
+use super::{CompositeSaved, KernelWork, Phase, Splats, ALPHA_MAX, ALPHA_MIN, TP};
 use crate::image2d::Image2d;
 use crate::real::Real;
 use crate::simd::Simd;
@@ -137,6 +135,30 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
         }
     }
     (recs, stats)
+}
+
+/// Per 2-bit `halves` value of a tile row ([`Entry::halves`]), the lanes of its columns that a
+/// chord-tested half may hold.
+const HALF_MASKS: [[u32; TILE]; 4] = {
+    let mut m = [[0u32; TILE]; 4];
+    let mut b = 0;
+    while b < 4 {
+        let mut k = 0;
+        while k < TILE {
+            if (b >> (k / 8)) & 1 != 0 {
+                m[b][k] = u32::MAX;
+            }
+            k += 1;
+        }
+        b += 1;
+    }
+    m
+};
+
+/// `W` values of `v` from `o`.
+#[inline(always)]
+fn fixed<T: Copy, const W: usize, const N: usize>(v: &[T; N], o: usize) -> &[T; W] {
+    v[o..o + W].try_into().unwrap()
 }
 
 /// Per-pixel state of the backward kernel, tile-local: T recovered so far, the final T, the
