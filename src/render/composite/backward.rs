@@ -1,7 +1,8 @@
 //! Backward pass of the compositor: the exact vector-Jacobian product of Eqs. (4)-(5) (the
 //! formulas are in the stage header, [`super`]). Per tile, back to front over the work list
-//! saved by the forward, with T recovered by division; one gradient record per entry, reduced
-//! sequentially in tile order so that the gradients are bit-identical for any thread count.
+//! saved by the forward, with T recovered by division, an entry's tile rows two per lane loop
+//! ([`rows_step`]); one gradient record per entry, reduced sequentially in tile order so that
+//! the gradients are bit-identical for any thread count.
 
 use rayon::prelude::*;
 
