@@ -264,6 +264,18 @@ fn pm(v: &[f64], prec: usize) -> String {
     }
 }
 
+/// [`pm`] with the decimals that give the mean `digits` significant digits (at least 1
+/// decimal): fps runs from ~0.1 (NeRF) to ~100 (Gaussians).
+fn pm_sig(v: &[f64], digits: i32) -> String {
+    let (m, _, _) = verdict::mean_sd(v);
+    let mag = if m.is_finite() && m != 0.0 {
+        m.abs().log10().floor() as i32
+    } else {
+        0
+    };
+    pm(v, (digits - 1 - mag).clamp(1, 6) as usize)
+}
+
 /// How a method is named in tables and charts: the plan's name, with ` (reduced)` when it runs
 /// a reduced neural-field preset (its numbers are not those of the upstream configuration).
 pub fn method_label(method: &str, base: &str) -> String {
@@ -397,7 +409,7 @@ pub fn tables_md(
                 pm(&vals(rs, |r| r.psnr), 2),
                 pm(&vals(rs, |r| r.ssim), 4),
                 pm(&vals(rs, |r| r.train_time_s), 1),
-                pm(&vals(rs, |r| r.fps), 1),
+                pm_sig(&vals(rs, |r| r.fps), 3),
             );
         }
         s.push('\n');
@@ -599,7 +611,16 @@ pub fn write_all(
 
 #[cfg(test)]
 mod tests {
-    use super::method_label;
+    use super::{method_label, pm_sig};
+
+    #[test]
+    fn fps_keep_three_significant_digits() {
+        assert_eq!(pm_sig(&[110.14, 110.16], 3), "110.2 ± 0.0");
+        assert_eq!(pm_sig(&[1.93], 3), "1.93");
+        assert_eq!(pm_sig(&[0.0817, 0.0817], 3), "0.0817 ± 0.0000");
+        assert_eq!(pm_sig(&[0.0], 3), "0.00");
+        assert_eq!(pm_sig(&[], 3), "-");
+    }
 
     #[test]
     fn reduced_field_presets_are_labelled_as_reduced() {
