@@ -20,14 +20,16 @@
 //! - For f32 volumes Siddon runs on vector lanes (AVX-512: 16 rays at once, AVX2: 8; chosen at
 //!   run time, [`Projector::with_simd`]): each lane walks one ray with the per-ray loop's
 //!   comparisons and IEEE operations in its order, so every instruction set gives the per-ray
-//!   loop's bits ([`Simd::Scalar`] and f64 volumes run that loop). Trilinear runs the per-ray
-//!   loop on every path.
+//!   loop's bits ([`Simd::Scalar`] and f64 volumes run that loop). Trilinear's inner loop runs
+//!   the samples of one ray in the lanes and adds them in the per-ray loop's order, so it too
+//!   gives that loop's bits on every path.
 
 pub mod bench;
 mod lanes;
 pub mod siddon;
 mod siddon_lanes;
 pub mod trilinear;
+mod trilinear_lanes;
 
 use rayon::prelude::*;
 
@@ -146,7 +148,7 @@ impl<'a, R: Real> Projector<'a, R> {
         crate::geometry::check_view(&cam, (self.grid.lo, self.grid.hi))?;
         let (w, h) = (cam.width, cam.height);
         let mut data = vec![R::zero(); w * h];
-        let setup = trilinear::Setup::new(&self.grid, self.geo.accuracy);
+        let setup = trilinear::Setup::new(&self.grid, self.geo.accuracy).with_simd(self.simd);
         let cols_inner = cols_inner(&self.grid, &cam);
         let hits: Vec<usize> = data
             .par_chunks_mut(w * BAND)

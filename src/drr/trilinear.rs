@@ -25,6 +25,7 @@
 use super::{clip_ray, Grid};
 use crate::geometry::{Camera, Mode};
 use crate::real::Real;
+use crate::simd::Simd;
 
 /// The ray-march of the ray through pixel (`col`, `row`), and whether that ray met the volume
 /// box.
@@ -81,6 +82,8 @@ pub(crate) struct Setup {
     outer: ([f64; 3], [f64; 3]),
     /// Box of voxel centres (all 8 neighbours inside), or `None` if an axis has 1 voxel.
     inner: Option<([f64; 3], [f64; 3])>,
+    /// Instruction set of the inner loop ([`super::trilinear_lanes`] unless scalar).
+    simd: Simd,
 }
 
 impl Setup {
@@ -99,7 +102,15 @@ impl Setup {
             h0: accuracy * grid.s[0].min(grid.s[1]).min(grid.s[2]),
             outer: (olo, ohi),
             inner: grid.n.iter().all(|&n| n >= 2).then_some((ilo, ihi)),
+            simd: Simd::Scalar,
         }
+    }
+
+    /// The same set-up with the inner loop on `simd` (supported; f32 volumes only, others
+    /// stay scalar).
+    pub(crate) fn with_simd(mut self, simd: Simd) -> Self {
+        self.simd = simd;
+        self
     }
 }
 
@@ -147,7 +158,7 @@ pub(crate) fn integrate<R: Real>(
             acc += sample_padded(grid, at(q0, dq, i));
         }
         let mut padded = R::zero();
-        acc += march_inner(grid, q0, dq, j_lo, j_hi, &mut padded);
+        acc += march_inner(grid, setup.simd, q0, dq, j_lo, j_hi, &mut padded);
         acc += padded;
         for i in j_hi + 1..=i_hi {
             acc += sample_padded(grid, at(q0, dq, i));
@@ -167,7 +178,7 @@ fn at(q0: [f64; 3], dq: [f64; 3], i: i64) -> [f64; 3] {
 }
 
 /// Fixed-point scale of the fast path: positions in voxel units x 2^32, in `i64`.
-const FIX: f64 = 4294967296.0;
+pub(crate) const FIX: f64 = 4294967296.0;
 
 /// Sum of the samples `j_lo..=j_hi` (sample `i` at continuous index `q0 + i dq`), 0 when the range
 /// is empty. Samples outside the fast range go to the zero-padded path and are added
@@ -179,6 +190,7 @@ const FIX: f64 = 4294967296.0;
 /// start and step (2^-33 voxel) moves a sample by less than 1e-6 voxel over 4000 steps.
 fn march_inner<R: Real>(
     grid: &Grid<R>,
+    simd: Simd,
     q0: [f64; 3],
     dq: [f64; 3],
     mut j_lo: i64,
@@ -225,6 +237,9 @@ fn march_inner<R: Real>(
         return R::zero();
     }
     let count = (j_hi - j_lo + 1) as usize;
+    if let Some(sum) = march_lanes(grid, simd, pos(k_lo), dp, count) {
+        return sum;
+    }
     let [mut px, mut py, mut pz] = pos(k_lo);
     let [dx, dy, dz] = dp;
     const MASK: i64 = 0xffff_ffff;
@@ -269,43 +284,120 @@ fn march_inner<R: Real>(
     acc
 }
 
+/// The inner loop's sum on the vector lanes of `simd` ([`super::trilinear_lanes`], the same
+/// bits), or `None` where the loop above runs: the scalar path, a volume that is not f32 or has
+/// 2^31 voxels or more.
+#[inline]
+fn march_lanes<R: Real>(
+    grid: &Grid<R>,
+    simd: Simd,
+    p: [i64; 3],
+    dp: [i64; 3],
+    count: usize,
+) -> Option<R> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if simd == Simd::Scalar
+            || std::any::TypeId::of::<R>() != std::any::TypeId::of::<f32>()
+            || grid.data.len() >= 1 << 31
+        {
+            return None;
+        }
+        // SAFETY: R is f32 (checked above): same size, alignment and bits.
+        let data = unsafe {
+            std::slice::from_raw_parts(grid.data.as_ptr().cast::<f32>(), grid.data.len())
+        };
+        // SAFETY: `simd` is supported (the projector's `or_narrower`); the grid has fewer than
+        // 2^31 voxels and at least 2 per axis (the fast path's precondition); the caller checked
+        // that both end positions, hence all (linear in k), are inside the centre box.
+        let sum = unsafe {
+            match simd {
+                Simd::Avx512 => super::trilinear_lanes::march_avx512(data, grid.n, p, dp, count),
+                Simd::Avx2 => super::trilinear_lanes::march_avx2(data, grid.n, p, dp, count),
+                Simd::Scalar => return None,
+            }
+        };
+        <R as num_traits::NumCast>::from(sum)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let _ = (grid, simd, p, dp, count);
+        None
+    }
+}
+
 #[inline(always)]
 fn fixed_frac<R: Real>(f: i64) -> R {
     <R as num_traits::NumCast>::from(f).unwrap_or_else(R::zero)
 }
 
+/// `x.floor()` for `|x| < 2^52`, without the library call the baseline x86-64 target makes for
+/// it (no rounding instruction before SSE4.1): an integral `x` (-0.0 included) is its own
+/// floor; otherwise the truncation, exact, or one below it when it rounded up.
+#[inline(always)]
+fn floor(x: f64) -> f64 {
+    let t = x as i64 as f64;
+    if t == x {
+        x
+    } else if t > x {
+        t - 1.0
+    } else {
+        t
+    }
+}
+
 /// The zero-padded trilinear interpolant at continuous index `q` (voxel centres at integers).
 fn sample_padded<R: Real>(grid: &Grid<R>, q: [f64; 3]) -> R {
-    let mut i0 = [0i64; 3];
-    let mut f = [R::zero(); 3];
+    // Per axis: the lower and the upper neighbour's index (`None` outside the grid) and weight.
+    let mut at = [[None; 2]; 3];
+    let mut wt = [[R::zero(); 2]; 3];
     for a in 0..3 {
-        if !(q[a] > -1.0 && q[a] < grid.n[a] as f64) {
+        let n = grid.n[a];
+        if !(q[a] > -1.0 && q[a] < n as f64) {
             return R::zero();
         }
-        let fl = q[a].floor();
-        i0[a] = fl as i64;
-        f[a] = R::c(q[a] - fl);
+        let fl = floor(q[a]);
+        let f = R::c(q[a] - fl);
+        let i = fl as i64;
+        at[a] = [i, i + 1].map(|i| (i >= 0 && i < n as i64).then_some(i as usize));
+        wt[a] = [R::one() - f, f];
     }
+    let [nx, ny, _] = grid.n;
     let mut acc = R::zero();
+    // Corners in the order x, then y, then z up; the weight is 1 x w_x x w_y x w_z.
     for corner in 0..8 {
-        let mut idx = 0usize;
-        let mut w = R::one();
-        let mut inside = true;
-        let mut mult = 1usize;
-        for a in 0..3 {
-            let up = (corner >> a) & 1 == 1;
-            let i = i0[a] + up as i64;
-            if i < 0 || i >= grid.n[a] as i64 {
-                inside = false;
-                break;
-            }
-            idx += i as usize * mult;
-            mult *= grid.n[a];
-            w *= if up { f[a] } else { R::one() - f[a] };
-        }
-        if inside {
-            acc += w * grid.data[idx];
+        let (ux, uy, uz) = (corner & 1, (corner >> 1) & 1, corner >> 2);
+        if let (Some(x), Some(y), Some(z)) = (at[0][ux], at[1][uy], at[2][uz]) {
+            let w = R::one() * wt[0][ux] * wt[1][uy] * wt[2][uz];
+            acc += w * grid.data[x + nx * (y + ny * z)];
         }
     }
     acc
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn floor_is_the_library_floor() {
+        let xs = [
+            -0.999999,
+            -0.5,
+            -0.0,
+            0.0,
+            1e-300,
+            -1e-300,
+            0.5,
+            1.0,
+            2.999999999,
+            3.0,
+            511.5,
+            -1.0,
+            -1.5,
+            4503599627370495.5,
+            -4503599627370495.5,
+        ];
+        for x in xs {
+            assert_eq!(super::floor(x).to_bits(), x.floor().to_bits(), "{x}");
+        }
+    }
 }
