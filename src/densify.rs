@@ -31,6 +31,9 @@
 //!
 //! Split sampling uses `ChaCha8Rng` seeded from (run seed, iteration) and Box-Muller normals,
 //! drawn in the order of the appended Gaussians (sample, Gaussian, axis).
+//!
+//! [`TrainState`]: crate::densify::TrainState
+//! [`TrainState::remap`]: crate::densify::TrainState::remap
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;

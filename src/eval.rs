@@ -14,6 +14,9 @@
 //!   median pass. Upstream's "testing speed" also timed its metric computation.
 //! - peak memory ([`peak_memory_bytes`]): `VmHWM` of `/proc/self/status` (Linux), the
 //!   process's resident-set high-water mark.
+//!
+//! [`render_fps`]: crate::eval::render_fps
+//! [`peak_memory_bytes`]: crate::eval::peak_memory_bytes
 
 use std::time::Instant;
 

@@ -30,6 +30,8 @@
 //! Determinism: filtering is per row and backprojection per voxel, each one sequential loop
 //! (views in order); rayon distributes whole rows / z-slices, so the volume is bit-identical
 //! for any thread count.
+//!
+//! [`filter_row`]: crate::fdk::filter_row
 
 use rayon::prelude::*;
 

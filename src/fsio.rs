@@ -6,6 +6,8 @@
 //! therefore sees either the old file or the complete new one, never a partial file; a failed
 //! write (disk full, permission) removes the temporary file and leaves the old file as it was,
 //! so no 0-byte or truncated output is left behind.
+//!
+//! [`write_atomic`]: crate::fsio::write_atomic
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -18,6 +18,8 @@
 //! - Volume: `nVoxel`, `dVoxel`, `offOrigin` are `[x, y, z]`; voxel (i, j, k) has its centre at
 //!   (-sX/2 + (i + 1/2) dX, ...) + offOrigin with sX = nX dX (TIGRE / NAF).
 //! - Parallel beam: rays along camera z through the same detector coordinates (no divergence).
+//!
+//! [`Camera`]: crate::geometry::Camera
 
 use std::path::Path;
 

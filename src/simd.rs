@@ -136,7 +136,7 @@ unsafe fn peak_loop_avx512(iters: u64, m: f32, c: f32) -> f32 {
 
 /// Runs the peak-throughput loop of f32 multiplies and adds (not fused: the kernels do not
 /// fuse) with the instruction set `simd` (or the widest supported narrower one) on `threads`
-/// threads at once, each doing `iters` rounds of [`PEAK_LANES`] multiply-adds, and returns the
+/// threads at once, each doing `iters` rounds of `PEAK_LANES` multiply-adds, and returns the
 /// number of floating-point operations done. The caller times it: flops over wall time is the
 /// machine's peak rate, flops over the process CPU time its peak per busy core (the measure
 /// that other load on a shared machine does not lower).

@@ -3,6 +3,12 @@
 //! benchmark scenes ([`bench`]). A gradient check of any stage reports [`Row`]s (stage, case,
 //! variant, parameter group, errors), so a new stage adds its rows to the same table: write a
 //! `rows` function like [`gradcheck::rows`] and print it with the others in `unispine gradcheck`.
+//!
+//! [`gradcheck`]: crate::audit::gradcheck
+//! [`field`]: crate::audit::field
+//! [`bench`]: crate::audit::bench
+//! [`Row`]: crate::audit::Row
+//! [`gradcheck::rows`]: crate::audit::gradcheck::rows
 
 pub mod bench;
 pub mod field;

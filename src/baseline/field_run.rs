@@ -18,7 +18,8 @@ use crate::train::run_dir::CHECKPOINT;
 use crate::train::{Event, IterRate, Metrics, RunDir};
 
 /// Continue the stopped field run in `dir` (its `config.json` and `checkpoint.bin`) on `ds`,
-/// with the same bits as a run that never stopped; writes the run folder as [`run`] does.
+/// with the same bits as a run that never stopped; writes the run folder as
+/// [`run`](crate::baseline::run) does.
 pub fn resume(
     dir: &Path,
     ds: &Dataset,

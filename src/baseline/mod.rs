@@ -4,8 +4,8 @@
 //!
 //! Scoring: a baseline predicts raw line integrals (the dataset's units). Each test view's
 //! prediction is mapped with the same affine map that normalises its ground truth
-//! (`(p - min(gt)) / (max(gt) - min(gt))`, [`crate::eval::normalise_gt`]), clamped to [0, 1]
-//! like a Gaussian render, and scored with [`crate::eval::psnr`] and
+//! (`(p - min(gt)) / (max(gt) - min(gt))`, [`crate::dataset::targets::normalise_gt`]),
+//! clamped to [0, 1] like a Gaussian render, and scored with [`crate::eval::psnr`] and
 //! [`crate::loss::ssim::ssim`] against the normalised ground truth. This is PSNR / SSIM with the
 //! data range of each ground-truth view; it does not rescale the prediction by its own range
 //! (which would hide a scale error).
@@ -18,6 +18,8 @@
 //! (the columns of the Gaussian trainer's), the model (`model.npy` for FDK: f32 `[x, y, z]`
 //! volume, x fastest on disk, numpy reads it as an ordinary `[x, y, z]` array), and
 //! `previews/test_KK.png` (render | ground truth).
+//!
+//! [`Metrics`]: crate::train::Metrics
 
 use std::path::Path;
 use std::sync::atomic::AtomicBool;

@@ -8,7 +8,7 @@
 //! - `grads.npz` (with `--grad-weights W.npy`): one array per PLY field group, in the PLY's stored
 //!   (pre-activation) parametrisation and in the computing precision (f64 by default):
 //!   `xyz` [N, 3], `features` [N, 3 + 3 K] (`f_dc_0..2` then `f_rest_0..3K-1`, channel-major as
-//!   stored; K = rest coefficients per channel present in the file), `opacity` [N] (logit),
+//!   stored; K = rest coefficients per channel present in the file), `opacity` \[N\] (logit),
 //!   `scale` [N, 3] (log-scale), `rot` [N, 4] (unnormalised quaternion w, x, y, z).
 //!   The file's three colour channels are averaged into our single channel on reading, so the
 //!   gradient of each stored channel is one third of the gradient of the averaged feature.

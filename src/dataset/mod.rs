@@ -2,6 +2,8 @@
 //! manifest of units, normalisation and provenance. Stored as a folder (see [`store`]):
 //! `dataset.json`, `train.npy`, `test.npy` (f32 [N, v, u], row 0 = top), `volume.npy`
 //! ([x, y, z]) and PNG previews.
+//!
+//! [`store`]: crate::dataset::store
 
 pub mod generate;
 pub mod noise;

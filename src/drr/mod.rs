@@ -23,6 +23,9 @@
 //!   loop's bits ([`Simd::Scalar`] and f64 volumes run that loop). Trilinear's inner loop runs
 //!   the samples of one ray in the lanes and adds them in the per-ray loop's order, so it too
 //!   gives that loop's bits on every path.
+//!
+//! [`Projector::with_simd`]: crate::drr::Projector::with_simd
+//! [`Simd::Scalar`]: crate::simd::Simd::Scalar
 
 pub mod bench;
 mod lanes;

@@ -5,7 +5,7 @@
 //! [`super::train::FieldTrainer::batch`]).
 //!
 //! Layout: the magic line `unispine-field-checkpoint`, a little-endian u64 header length, the
-//! header as JSON ([`Header`]), the log (UTF-8), then the parameters, `m` and `v` as
+//! header as JSON (`Header`), the log (UTF-8), then the parameters, `m` and `v` as
 //! little-endian f32 arrays of `n_params` values each.
 
 use std::path::Path;

@@ -23,6 +23,16 @@
 //! | `tensorf` | as full | as full | 512 x 128 | 300 | 150 epochs, 0.1 |
 //!
 //! `--iters N` replaces the iteration count and scales the StepLR step in proportion.
+//!
+//! [`encode`]: crate::field::encode
+//! [`mlp`]: crate::field::mlp
+//! [`gemm`]: crate::field::gemm
+//! [`render`]: crate::field::render
+//! [`adam`]: crate::field::adam
+//! [`train`]: crate::field::train
+//! [`bench`]: crate::field::bench
+//! [`FieldConfig::preset`]: crate::field::FieldConfig::preset
+//! [`Real`]: crate::real::Real
 
 pub mod act;
 pub mod adam;

@@ -404,7 +404,7 @@ pub fn read_ply_full<R: Real>(path: &Path) -> Result<(Gaussians<R>, FeatureLayou
 
 /// Gradients with respect to the fields stored in a PLY of layout `layout` (pre-activation, as
 /// stored), widened to f64: `xyz` [N, 3], `features` [N, C + C K] (`f_dc_0..C-1`, then
-/// `f_rest_{c K + (k - 1)}`, channel-major as stored), `opacity` [N] (logit), `scale` [N, 3]
+/// `f_rest_{c K + (k - 1)}`, channel-major as stored), `opacity` \[N\] (logit), `scale` [N, 3]
 /// (log-scale), `rot` [N, 4] (w, x, y, z).
 #[derive(Clone, Debug, PartialEq)]
 pub struct StoredGrads {

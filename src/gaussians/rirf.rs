@@ -5,7 +5,7 @@
 //! - X-Gaussian code: i = max(0, 0.5 + sum_k lambda_k f_k) ([`rirf_xgaussian`]); the gradient
 //!   is zero where the value is clamped (v < 0), as in 3DGS's `computeColorFromSH`.
 //! - SH (3DGS / UniSpine code at HEAD): i = max(0, 0.5 + sum_k Y_k(d) f_k) with d the unit
-//!   direction from the camera centre to the mean ([`sh_basis`], [`sh_basis_grad`]).
+//!   direction from the camera centre to the mean ([`sh_basis`], [`sh_basis_vjp`]).
 //!
 //! lambda = the 16 real-SH normalisation constants with the signs of 3DGS's SH evaluation and
 //! the direction terms dropped: (C0, -C1, C1, -C1, C2[0..5], C3[0..7]). The constants are the

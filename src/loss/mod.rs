@@ -7,6 +7,9 @@
 //! with `L_data` one of L1 (3DGS, X-Gaussian), Charbonnier, or the SPWM-weighted Charbonnier of
 //! Eq. (9) (UniSpine-GS). [`forward_backward`] returns the value, its parts, and d L / d render;
 //! the SPWM weights (Eqs. 6-7, [`spwm`]) are inputs, built from the ground truth only.
+//!
+//! [`forward_backward`]: crate::loss::forward_backward
+//! [`spwm`]: crate::loss::spwm
 
 pub mod charbonnier;
 pub mod filters;

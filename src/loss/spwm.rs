@@ -150,9 +150,9 @@ pub struct Attention<R: Real> {
     pub gate: Image2d<R>,
 }
 
-/// Linear-interpolated quantile of `v` (numpy / torch `linear`): sorted[i] + f (sorted[i+1] -
-/// sorted[i]) at position q (n - 1) = i + f. The two order statistics are found by selection
-/// (O(n)); their values do not depend on the algorithm.
+/// Linear-interpolated quantile of `v` (numpy / torch `linear`):
+/// `sorted[i] + f (sorted[i+1] - sorted[i])` at position q (n - 1) = i + f. The two order
+/// statistics are found by selection (O(n)); their values do not depend on the algorithm.
 pub fn quantile_linear(v: &[f64], q: f64) -> f64 {
     assert!(!v.is_empty(), "quantile of an empty set");
     let mut s = v.to_vec();

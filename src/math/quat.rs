@@ -3,7 +3,7 @@
 //!
 //! 3DGS's CUDA kernel does not normalise (the division is commented out) and relies on PyTorch
 //! autograd through `F.normalize`; gsplat and brush normalise in the kernel and apply
-//! (I - q^ q^^T) / |q|. We do the latter: [`rotmat_vjp`] returns the gradient with respect to
+//! (I - q^ q^^T) / |q|. We do the latter: [`normalize_vjp`] returns the gradient with respect to
 //! the *unnormalised* q.
 
 #![allow(clippy::needless_range_loop)] // small fixed-size matrix loops read best indexed

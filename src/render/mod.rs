@@ -8,6 +8,11 @@
 //!
 //! [`forward`] and [`backward`] chain the two and add the screen-space (NDC) mean-gradient norm
 //! used by densification.
+//!
+//! [`project`]: crate::render::project
+//! [`composite`]: crate::render::composite
+//! [`forward`]: crate::render::forward
+//! [`backward`]: crate::render::backward
 
 pub mod composite;
 pub mod lanes;

@@ -6,6 +6,12 @@
 //! `unispine train` child processes into `OUT/runs/DATASET/METHOD/seedK/`, resumable) ->
 //! [`aggregate`] (results.csv / results.json, mean +- sd per row) -> [`verdict`] (the paper's
 //! claims as paired differences with 95 % intervals) -> `tables.md`.
+//!
+//! [`plan`]: crate::reproduce::plan
+//! [`cell`]: crate::reproduce::cell
+//! [`run`]: crate::reproduce::run
+//! [`aggregate`]: crate::reproduce::aggregate
+//! [`verdict`]: crate::reproduce::verdict
 
 pub mod aggregate;
 pub mod cell;

@@ -35,6 +35,20 @@
 //! The loop with its events and files is [`session`]; the run folder is [`run_dir`], its
 //! resumable state [`checkpoint`]. [`stages`] times the stages of [`Trainer::step`] for
 //! `unispine bench train` (off unless [`Trainer::stages`] is set; it changes no result).
+//!
+//! [`config`]: crate::train::config
+//! [`settings`]: crate::train::settings
+//! [`Trainer`]: crate::train::Trainer
+//! [`run`]: crate::train::run
+//! [`event`]: crate::train::event
+//! [`LEAVE_FACTOR`]: crate::train::LEAVE_FACTOR
+//! [`compact`]: crate::train::compact
+//! [`session`]: crate::train::session
+//! [`run_dir`]: crate::train::run_dir
+//! [`checkpoint`]: crate::train::checkpoint
+//! [`stages`]: crate::train::stages
+//! [`Trainer::step`]: crate::train::Trainer::step
+//! [`Trainer::stages`]: crate::train::Trainer::stages
 
 pub mod checkpoint;
 pub mod compact;

@@ -1,4 +1,4 @@
-//! The settings of `unispine train`, each declared once in the [`settings!`] table below: the
+//! The settings of `unispine train`, each declared once in the `settings!` table below: the
 //! `config.json` field it lives in, its allowed range (checked by [`TrainConfig::validate`] on
 //! every config: preset, `--config FILE` and flags alike) and the command-line flag that
 //! overrides it, with its help. The table generates [`TrainOverrides`] (the clap flags),

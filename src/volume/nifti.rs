@@ -39,7 +39,7 @@ pub struct Header {
     pub dims: [usize; 3],
     /// NIfTI `datatype` code.
     pub datatype: i16,
-    /// `pixdim[0..8]` as stored (pixdim[0] is qfac).
+    /// `pixdim[0..8]` as stored (`pixdim[0]` is qfac).
     pub pixdim: [f32; 8],
     /// Byte offset of the voxel data.
     pub vox_offset: f32,
@@ -329,7 +329,7 @@ fn mm_per_unit(xyzt_units: u8) -> (f64, &'static str) {
 /// The qform affine (row-major 4x4, file units) from the quaternion fields, as nifti1_io's
 /// `nifti_quatern_to_mat44`: a = sqrt(1 - b^2 - c^2 - d^2) (when that is below 1e-7 the
 /// quaternion is renormalised with a = 0), voxel sizes |pixdim| (1 when zero or not finite),
-/// z column negated when qfac = pixdim[0] < 0. Never panics.
+/// z column negated when qfac = `pixdim[0]` < 0. Never panics.
 pub fn qform_affine(h: &Header) -> [[f64; 4]; 4] {
     let [mut b, mut c, mut d] = h.quatern.map(|v| v as f64);
     let mut a = 1.0 - (b * b + c * c + d * d);
