@@ -103,6 +103,43 @@ impl Simd {
     }
 }
 
+/// Two copies of a kernel entry point with one signature: the first compiled with AVX2 enabled,
+/// the second with AVX-512 F/BW/DQ/VL (the features [`Simd::supported`] checks), each running its
+/// own body. The bodies call `#[inline(always)]` generic code, which is then compiled for that
+/// instruction set; the functions are `unsafe` to call (the CPU must have the features) and exist
+/// on x86-64 only.
+///
+/// ```text
+/// wide_kernels! {
+///     /// Docs of both.
+///     unsafe fn [R: Real](x: &mut [R]);
+///     scale_avx2 => { scale::<R>(x) }
+///     scale_avx512 => { scale::<R>(x) }
+/// }
+/// ```
+///
+/// (Bodies must not hand the vector work to a closure: a closure that is not inlined is compiled
+/// without the function's target features.)
+macro_rules! wide_kernels {
+    (
+        $(#[$meta:meta])*
+        $vis:vis unsafe fn [$($gen:tt)*] ($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)?;
+        $avx2:ident => $b2:block
+        $avx512:ident => $b5:block
+    ) => {
+        $(#[$meta])*
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        $vis unsafe fn $avx2<$($gen)*>($($arg: $ty),*) $(-> $ret)? $b2
+
+        $(#[$meta])*
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
+        $vis unsafe fn $avx512<$($gen)*>($($arg: $ty),*) $(-> $ret)? $b5
+    };
+}
+pub(crate) use wide_kernels;
+
 /// f32 accumulators of the peak-throughput loop: 12 vectors of 8 lanes or 6 of 16, enough
 /// independent multiply-add chains to keep every floating-point pipe busy while they stay in
 /// registers.
@@ -122,16 +159,10 @@ fn peak_loop(iters: u64, m: f32, c: f32) -> f32 {
     acc.iter().sum()
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn peak_loop_avx2(iters: u64, m: f32, c: f32) -> f32 {
-    peak_loop(iters, m, c)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
-unsafe fn peak_loop_avx512(iters: u64, m: f32, c: f32) -> f32 {
-    peak_loop(iters, m, c)
+wide_kernels! {
+    unsafe fn [](iters: u64, m: f32, c: f32) -> f32;
+    peak_loop_avx2 => { peak_loop(iters, m, c) }
+    peak_loop_avx512 => { peak_loop(iters, m, c) }
 }
 
 /// Runs the peak-throughput loop of f32 multiplies and adds (not fused: the kernels do not

@@ -1,10 +1,11 @@
-//! Vector lanes of the DRR kernels: one ray per lane, f32 values, i32 voxel indices.
+//! Vector lanes of the DRR kernels: f32 values, i32 voxel indices.
 //!
-//! The kernel ([`super::siddon_lanes`]) is written once against [`Lanes`] and compiled for
-//! AVX-512 (16 lanes) and AVX2 (8 lanes); the scalar path runs the per-ray loop of
-//! [`super::siddon`]. Every lane performs the IEEE
-//! operations of the per-ray loop in the same order (no fused multiply-add anywhere), so every
-//! path gives the same bits (`tests/drr_simd.rs` compares them).
+//! The kernels ([`super::siddon_lanes`]: one ray per lane; [`super::trilinear_lanes`]: the
+//! samples of one ray in the lanes) are written once against [`Lanes`] and compiled for AVX-512
+//! (16 lanes) and AVX2 (8 lanes); the scalar path runs the per-ray loops of [`super::siddon`]
+//! and [`super::trilinear`]. Every lane performs the IEEE operations of the per-ray loop in the
+//! same order (no fused multiply-add anywhere), so every path gives the same bits
+//! (`tests/drr_simd.rs` compares them).
 
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;

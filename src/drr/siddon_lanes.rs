@@ -161,34 +161,19 @@ pub(crate) unsafe fn run<L: Lanes>(
     }
 }
 
-/// [`run`] compiled for AVX-512.
-///
-/// # Safety
-/// As [`run`], on a CPU with AVX-512 F/BW/DQ/VL.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
-pub(crate) unsafe fn run_avx512(
-    data: &[f32],
-    rays: &mut dyn Iterator<Item = (usize, Walk<f32>)>,
-    out: &mut [f32],
-) {
-    // SAFETY: as this function.
-    unsafe { run::<super::lanes::Avx512>(data, &mut DynIter(rays), out) }
-}
-
-/// [`run`] compiled for AVX2.
-///
-/// # Safety
-/// As [`run`], on a CPU with AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-pub(crate) unsafe fn run_avx2(
-    data: &[f32],
-    rays: &mut dyn Iterator<Item = (usize, Walk<f32>)>,
-    out: &mut [f32],
-) {
-    // SAFETY: as this function.
-    unsafe { run::<super::lanes::Avx2>(data, &mut DynIter(rays), out) }
+crate::simd::wide_kernels! {
+    /// [`run`] compiled for AVX2 (`run_avx2`) or AVX-512 (`run_avx512`).
+    ///
+    /// # Safety
+    /// As [`run`], on a CPU with the instruction set.
+    pub(crate) unsafe fn [](
+        data: &[f32],
+        rays: &mut dyn Iterator<Item = (usize, Walk<f32>)>,
+        out: &mut [f32],
+    );
+    // SAFETY (both): as this function.
+    run_avx2 => { unsafe { run::<super::lanes::Avx2>(data, &mut DynIter(rays), out) } }
+    run_avx512 => { unsafe { run::<super::lanes::Avx512>(data, &mut DynIter(rays), out) } }
 }
 
 /// A `dyn Iterator` as a sized one (the ray source is called once per ray, not per step).

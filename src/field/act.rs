@@ -84,36 +84,20 @@ fn leaky_body<R: Real>(
     }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[allow(clippy::too_many_arguments)]
-unsafe fn leaky_avx2(
-    d: &[f32],
-    dl: Rows,
-    z: &[f32],
-    n: usize,
-    w: usize,
-    slope: f32,
-    out: &mut [f32],
-    ol: Rows,
-) {
-    leaky_body(d, dl, z, n, w, slope, out, ol)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
-#[allow(clippy::too_many_arguments)]
-unsafe fn leaky_avx512(
-    d: &[f32],
-    dl: Rows,
-    z: &[f32],
-    n: usize,
-    w: usize,
-    slope: f32,
-    out: &mut [f32],
-    ol: Rows,
-) {
-    leaky_body(d, dl, z, n, w, slope, out, ol)
+crate::simd::wide_kernels! {
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn [](
+        d: &[f32],
+        dl: Rows,
+        z: &[f32],
+        n: usize,
+        w: usize,
+        slope: f32,
+        out: &mut [f32],
+        ol: Rows,
+    );
+    leaky_avx2 => { leaky_body(d, dl, z, n, w, slope, out, ol) }
+    leaky_avx512 => { leaky_body(d, dl, z, n, w, slope, out, ol) }
 }
 
 /// `acc[o] += sum_r g[r * w + o]`, rows in order (each column one chain).
@@ -147,14 +131,8 @@ fn sum_rows_body<R: Real>(g: &[R], n: usize, w: usize, acc: &mut [R]) {
     }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn sum_rows_avx2(g: &[f32], n: usize, w: usize, acc: &mut [f32]) {
-    sum_rows_body(g, n, w, acc)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
-unsafe fn sum_rows_avx512(g: &[f32], n: usize, w: usize, acc: &mut [f32]) {
-    sum_rows_body(g, n, w, acc)
+crate::simd::wide_kernels! {
+    unsafe fn [](g: &[f32], n: usize, w: usize, acc: &mut [f32]);
+    sum_rows_avx2 => { sum_rows_body(g, n, w, acc) }
+    sum_rows_avx512 => { sum_rows_body(g, n, w, acc) }
 }

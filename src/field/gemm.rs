@@ -335,19 +335,18 @@ fn narrow_rows<const L: usize>(o: &Operands, c: &mut [f32], i: usize) {
     }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn kernel_avx2(o: Operands, c: &mut [f32]) {
-    // 6 x 16: 12 accumulators of 8 lanes, two of B, a broadcast and a product (16 registers).
-    kernel_generic::<6, 16, 16, 8, 32, 8>(o, c)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
-unsafe fn kernel_avx512(o: Operands, c: &mut [f32]) {
-    // 6 x 64: 24 accumulators of 16 lanes, four of B, a broadcast and a product (30 of the 32
-    // registers); remainder panels of 32 and 16 columns.
-    kernel_generic::<6, 64, 32, 16, 64, 16>(o, c)
+crate::simd::wide_kernels! {
+    unsafe fn [](o: Operands, c: &mut [f32]);
+    kernel_avx2 => {
+        // 6 x 16: 12 accumulators of 8 lanes, two of B, a broadcast and a product (16
+        // registers).
+        kernel_generic::<6, 16, 16, 8, 32, 8>(o, c)
+    }
+    kernel_avx512 => {
+        // 6 x 64: 24 accumulators of 16 lanes, four of B, a broadcast and a product (30 of the
+        // 32 registers); remainder panels of 32 and 16 columns.
+        kernel_generic::<6, 64, 32, 16, 64, 16>(o, c)
+    }
 }
 
 fn kernel_scalar(o: Operands, c: &mut [f32]) {

@@ -71,28 +71,16 @@ fn col_kernel<R: Real>(o: &mut [R], x: &[R], h: usize, i: usize, k: &[R]) {
     }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn row_kernel_avx2<R: Real>(o: &mut [R], xi: &[R], k: &[R]) {
-    row_kernel(o, xi, k)
+crate::simd::wide_kernels! {
+    unsafe fn [R: Real](o: &mut [R], xi: &[R], k: &[R]);
+    row_kernel_avx2 => { row_kernel(o, xi, k) }
+    row_kernel_avx512 => { row_kernel(o, xi, k) }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
-unsafe fn row_kernel_avx512<R: Real>(o: &mut [R], xi: &[R], k: &[R]) {
-    row_kernel(o, xi, k)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn col_kernel_avx2<R: Real>(o: &mut [R], x: &[R], h: usize, i: usize, k: &[R]) {
-    col_kernel(o, x, h, i, k)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
-unsafe fn col_kernel_avx512<R: Real>(o: &mut [R], x: &[R], h: usize, i: usize, k: &[R]) {
-    col_kernel(o, x, h, i, k)
+crate::simd::wide_kernels! {
+    unsafe fn [R: Real](o: &mut [R], x: &[R], h: usize, i: usize, k: &[R]);
+    col_kernel_avx2 => { col_kernel(o, x, h, i, k) }
+    col_kernel_avx512 => { col_kernel(o, x, h, i, k) }
 }
 
 /// 1D correlation of every row with `k` (odd length, centre `k.len() / 2`), zero padding:

@@ -115,54 +115,23 @@ fn flat_kernel<R: Real>(c: &Consts<R>, pc: &mut [R], mc: &mut [R], vc: &mut [R],
     }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn rows_kernel_avx2<R: Real, const N: usize>(
-    c: &Consts<R>,
-    pc: &mut [[R; N]],
-    mc: &mut [[R; N]],
-    vc: &mut [[R; N]],
-    gc: &[[R; N]],
-    range: std::ops::Range<usize>,
-) {
-    rows_kernel(c, pc, mc, vc, gc, range)
+crate::simd::wide_kernels! {
+    unsafe fn [R: Real, const N: usize](
+        c: &Consts<R>,
+        pc: &mut [[R; N]],
+        mc: &mut [[R; N]],
+        vc: &mut [[R; N]],
+        gc: &[[R; N]],
+        range: std::ops::Range<usize>,
+    );
+    rows_kernel_avx2 => { rows_kernel(c, pc, mc, vc, gc, range) }
+    rows_kernel_avx512 => { rows_kernel(c, pc, mc, vc, gc, range) }
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
-unsafe fn rows_kernel_avx512<R: Real, const N: usize>(
-    c: &Consts<R>,
-    pc: &mut [[R; N]],
-    mc: &mut [[R; N]],
-    vc: &mut [[R; N]],
-    gc: &[[R; N]],
-    range: std::ops::Range<usize>,
-) {
-    rows_kernel(c, pc, mc, vc, gc, range)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn flat_kernel_avx2<R: Real>(
-    c: &Consts<R>,
-    pc: &mut [R],
-    mc: &mut [R],
-    vc: &mut [R],
-    gc: &[R],
-) {
-    flat_kernel(c, pc, mc, vc, gc)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
-unsafe fn flat_kernel_avx512<R: Real>(
-    c: &Consts<R>,
-    pc: &mut [R],
-    mc: &mut [R],
-    vc: &mut [R],
-    gc: &[R],
-) {
-    flat_kernel(c, pc, mc, vc, gc)
+crate::simd::wide_kernels! {
+    unsafe fn [R: Real](c: &Consts<R>, pc: &mut [R], mc: &mut [R], vc: &mut [R], gc: &[R]);
+    flat_kernel_avx2 => { flat_kernel(c, pc, mc, vc, gc) }
+    flat_kernel_avx512 => { flat_kernel(c, pc, mc, vc, gc) }
 }
 
 /// Adam update of elements `range` of every row of one array-valued group, with the

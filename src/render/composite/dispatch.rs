@@ -41,7 +41,7 @@ pub(super) fn forward_tile<R: Real>(
     match k.simd {
         // SAFETY: the CPU supports the instruction set (checked by `supported`).
         Simd::Avx512 if Simd::Avx512.supported() => {
-            return unsafe { forward_tile_avx512(s, bins, t) };
+            return unsafe { forward_tile_avx512::<R, 16>(s, bins, t) };
         }
         Simd::Avx2 if k.wide && Simd::Avx2.supported() => {
             return unsafe { forward_tile_avx2::<R, 16>(s, bins, t) };
@@ -55,24 +55,14 @@ pub(super) fn forward_tile<R: Real>(
     super::forward::forward_tile::<R, 8>(s, bins, t)
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn forward_tile_avx2<R: Real, const W: usize>(
-    s: &[Option<Packed<R>>],
-    bins: &TileBins,
-    t: usize,
-) -> TileOut<R> {
-    super::forward::forward_tile::<R, W>(s, bins, t)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
-unsafe fn forward_tile_avx512<R: Real>(
-    s: &[Option<Packed<R>>],
-    bins: &TileBins,
-    t: usize,
-) -> TileOut<R> {
-    super::forward::forward_tile::<R, 16>(s, bins, t)
+crate::simd::wide_kernels! {
+    unsafe fn [R: Real, const W: usize](
+        s: &[Option<Packed<R>>],
+        bins: &TileBins,
+        t: usize,
+    ) -> TileOut<R>;
+    forward_tile_avx2 => { super::forward::forward_tile::<R, W>(s, bins, t) }
+    forward_tile_avx512 => { super::forward::forward_tile::<R, W>(s, bins, t) }
 }
 
 pub(super) fn backward_tile<R: Real>(
@@ -86,7 +76,7 @@ pub(super) fn backward_tile<R: Real>(
     match k.simd {
         // SAFETY: the CPU supports the instruction set (checked by `supported`).
         Simd::Avx512 if Simd::Avx512.supported() => {
-            return unsafe { backward_tile_avx512(s, saved, d_image, t) };
+            return unsafe { backward_tile_avx512::<R, 16>(s, saved, d_image, t) };
         }
         Simd::Avx2 if k.wide && Simd::Avx2.supported() => {
             return unsafe { backward_tile_avx2::<R, 16>(s, saved, d_image, t) };
@@ -100,24 +90,13 @@ pub(super) fn backward_tile<R: Real>(
     super::backward::backward_tile::<R, 8>(s, saved, d_image, t)
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn backward_tile_avx2<R: Real, const W: usize>(
-    s: &[Option<Packed<R>>],
-    saved: &CompositeSaved<R>,
-    d_image: &Image2d<R>,
-    t: usize,
-) -> TileGrads<R> {
-    super::backward::backward_tile::<R, W>(s, saved, d_image, t)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
-unsafe fn backward_tile_avx512<R: Real>(
-    s: &[Option<Packed<R>>],
-    saved: &CompositeSaved<R>,
-    d_image: &Image2d<R>,
-    t: usize,
-) -> TileGrads<R> {
-    super::backward::backward_tile::<R, 16>(s, saved, d_image, t)
+crate::simd::wide_kernels! {
+    unsafe fn [R: Real, const W: usize](
+        s: &[Option<Packed<R>>],
+        saved: &CompositeSaved<R>,
+        d_image: &Image2d<R>,
+        t: usize,
+    ) -> TileGrads<R>;
+    backward_tile_avx2 => { super::backward::backward_tile::<R, W>(s, saved, d_image, t) }
+    backward_tile_avx512 => { super::backward::backward_tile::<R, W>(s, saved, d_image, t) }
 }
