@@ -207,19 +207,9 @@ fn lanes_f32<'g, 'o, R: Real>(
     grid: &Grid<'g, R>,
     out: &'o mut [R],
 ) -> Option<(Grid<'g, f32>, &'o mut [f32])> {
-    if simd == Simd::Scalar
-        || std::any::TypeId::of::<R>() != std::any::TypeId::of::<f32>()
-        || grid.data.len() >= 1 << 31
-    {
-        return None;
-    }
-    // SAFETY: R is f32 (checked above): same size, alignment and bits.
-    let (data, out) = unsafe {
-        (
-            std::slice::from_raw_parts(grid.data.as_ptr().cast::<f32>(), grid.data.len()),
-            std::slice::from_raw_parts_mut(out.as_mut_ptr().cast::<f32>(), out.len()),
-        )
-    };
+    let data = lane_data(simd, grid.data)?;
+    // SAFETY: R is f32 (`lane_data` checked it): same size, alignment and bits.
+    let out = unsafe { std::slice::from_raw_parts_mut(out.as_mut_ptr().cast::<f32>(), out.len()) };
     Some((
         Grid {
             data,
@@ -230,6 +220,19 @@ fn lanes_f32<'g, 'o, R: Real>(
         },
         out,
     ))
+}
+
+/// The voxel values as f32 when the vector kernels can run them: `simd` is a vector path, the
+/// values are f32 and fewer than 2^31 (i32 lane indices).
+fn lane_data<R: Real>(simd: Simd, data: &[R]) -> Option<&[f32]> {
+    if simd == Simd::Scalar
+        || std::any::TypeId::of::<R>() != std::any::TypeId::of::<f32>()
+        || data.len() >= 1 << 31
+    {
+        return None;
+    }
+    // SAFETY: R is f32 (checked above): same size, alignment and bits.
+    Some(unsafe { std::slice::from_raw_parts(data.as_ptr().cast::<f32>(), data.len()) })
 }
 
 /// The pixels of a band of `rows` rows of `w` pixels as `(col, row in band)`, tile by tile in

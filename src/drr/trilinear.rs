@@ -297,16 +297,7 @@ fn march_lanes<R: Real>(
 ) -> Option<R> {
     #[cfg(target_arch = "x86_64")]
     {
-        if simd == Simd::Scalar
-            || std::any::TypeId::of::<R>() != std::any::TypeId::of::<f32>()
-            || grid.data.len() >= 1 << 31
-        {
-            return None;
-        }
-        // SAFETY: R is f32 (checked above): same size, alignment and bits.
-        let data = unsafe {
-            std::slice::from_raw_parts(grid.data.as_ptr().cast::<f32>(), grid.data.len())
-        };
+        let data = super::lane_data(simd, grid.data)?;
         // SAFETY: `simd` is supported (the projector's `or_narrower`); the grid has fewer than
         // 2^31 voxels and at least 2 per axis (the fast path's precondition); the caller checked
         // that both end positions, hence all (linear in k), are inside the centre box.
