@@ -105,7 +105,9 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 /// Time `method` at `angle_deg` with a `size`^2 detector on each of `paths` (unsupported ones
 /// run their widest supported narrower path, as [`Projector::with_simd`] does). Checks that
-/// every path gives the same bits as the first (an error otherwise).
+/// every path gives the same bits as the first (an error otherwise). The extra views take turns
+/// (one of each path per round), so a drift of the machine's speed during the case affects every
+/// path alike and the ratios between paths stay comparable.
 pub fn time_case(
     vol: &Volume<f32>,
     method: Method,
@@ -127,6 +129,7 @@ pub fn time_case(
         peak_rss: None,
     };
     let mut first_bits: Option<Vec<u32>> = None;
+    let mut projectors = Vec::new();
     for &simd in paths {
         let (img, first_wall, first_cpu) =
             timed(|| Projector::new(vol, &geo, method).and_then(|p| p.with_simd(simd).view(angle)));
@@ -147,20 +150,26 @@ pub fn time_case(
             Some(_) => {}
         }
         let p = Projector::new(vol, &geo, method)?.with_simd(simd);
-        let (mut walls, mut cpus) = (Vec::new(), Vec::new());
-        for _ in 0..reps {
+        out.paths.push(PathTiming {
+            simd: p.simd(),
+            first_wall,
+            first_cpu,
+            extra_wall: 0.0,
+            extra_cpu: 0.0,
+        });
+        projectors.push(p);
+    }
+    let mut times = vec![(Vec::new(), Vec::new()); projectors.len()];
+    for _ in 0..reps {
+        for (p, (walls, cpus)) in projectors.iter().zip(times.iter_mut()) {
             let (img, w, c) = timed(|| p.view(angle));
             std::hint::black_box(img?);
             walls.push(w);
             cpus.push(c);
         }
-        out.paths.push(PathTiming {
-            simd: p.simd(),
-            first_wall,
-            first_cpu,
-            extra_wall: median(walls),
-            extra_cpu: median(cpus),
-        });
+    }
+    for (t, (walls, cpus)) in out.paths.iter_mut().zip(times) {
+        (t.extra_wall, t.extra_cpu) = (median(walls), median(cpus));
     }
     (out.rays, out.steps) = count_work(vol, &geo, angle, method)?;
     Ok(out)
@@ -191,4 +200,28 @@ fn count_work(vol: &Volume<f32>, geo: &ConeBeam, angle: f64, method: Method) -> 
         }
     }
     Ok((rays, steps))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_path_is_timed_on_the_same_view() {
+        let mut vol = Volume::<f32>::zeros([12, 10, 8], [1.0, 1.2, 2.0]);
+        for (i, v) in vol.data.iter_mut().enumerate() {
+            *v = (i % 7) as f32 * 0.25;
+        }
+        let paths = Simd::supported_paths();
+        for method in [Method::Siddon, Method::Trilinear] {
+            let t = time_case(&vol, method, 30.0, 16, 3, &paths).unwrap();
+            assert_eq!(t.paths.len(), paths.len());
+            for (p, &want) in t.paths.iter().zip(&paths) {
+                assert_eq!(p.simd, want);
+                assert!(p.extra_wall > 0.0 && p.extra_wall.is_finite(), "{p:?}");
+                assert!(p.extra_cpu >= 0.0 && p.first_wall > 0.0, "{p:?}");
+            }
+            assert!(t.rays > 0 && t.steps >= t.rays, "{t:?}");
+        }
+    }
 }
