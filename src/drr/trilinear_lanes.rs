@@ -100,6 +100,7 @@ pub(crate) unsafe fn march<L: Lanes>(
             let c0 = lerp!(c00, c10, fy);
             let c1 = lerp!(c01, c11, fy);
             L::store_f(lerp!(c0, c1, fz), &mut buf);
+            // (A full block's loop has a constant length, so it unrolls.)
             if valid == w {
                 for v in &buf[..w] {
                     acc += v;
