@@ -1,11 +1,11 @@
 //! Vector lanes of the DRR kernels: f32 values, i32 voxel indices.
 //!
-//! The kernels ([`super::siddon_lanes`]: one ray per lane; [`super::trilinear_lanes`]: the
-//! samples of one ray in the lanes) are written once against [`Lanes`] and compiled for AVX-512
-//! (16 lanes) and AVX2 (8 lanes); the scalar path runs the per-ray loops of [`super::siddon`]
-//! and [`super::trilinear`]. Every lane performs the IEEE operations of the per-ray loop in the
-//! same order (no fused multiply-add anywhere), so every path gives the same bits
-//! (`tests/drr_simd.rs` compares them).
+//! The kernels ([`super::siddon_lanes`]: one ray per lane, AVX-512 16 lanes and AVX2 8;
+//! [`super::trilinear_lanes`]: 8 samples of one ray in the lanes on both paths, with the
+//! further operations of [`SampleLanes`]) are written once against [`Lanes`]; the scalar path
+//! runs the per-ray loops of [`super::siddon`] and [`super::trilinear`]. Every lane performs
+//! the IEEE operations of the per-ray loop in the same order (no fused multiply-add anywhere),
+//! so every path gives the same bits (`tests/drr_simd.rs` compares them).
 
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
@@ -48,6 +48,15 @@ pub(crate) unsafe trait Lanes {
     /// # Safety
     /// `0 <= idx < data.len()` in every lane of `m`.
     unsafe fn gather(m: Self::M, idx: Self::I, data: &[f32]) -> Self::F;
+}
+
+/// The further operations of the trilinear kernel ([`super::trilinear_lanes`]), which runs
+/// blocks of 8 samples on both vector paths: implemented by [`Avx2`] only (the AVX-512 path
+/// calls it from code compiled with AVX-512 enabled).
+///
+/// # Safety
+/// As [`Lanes`].
+pub(crate) unsafe trait SampleLanes: Lanes {
     unsafe fn splat_f(x: f32) -> Self::F;
     /// `a * b` (low 32 bits).
     unsafe fn mul_i(a: Self::I, b: Self::I) -> Self::I;
@@ -160,50 +169,6 @@ unsafe impl Lanes for Avx512 {
     unsafe fn gather(m: __mmask16, idx: __m512i, data: &[f32]) -> __m512 {
         unsafe { _mm512_mask_i32gather_ps::<4>(_mm512_setzero_ps(), m, idx, data.as_ptr()) }
     }
-    #[inline(always)]
-    unsafe fn splat_f(x: f32) -> __m512 {
-        unsafe { _mm512_set1_ps(x) }
-    }
-    #[inline(always)]
-    unsafe fn mul_i(a: __m512i, b: __m512i) -> __m512i {
-        unsafe { _mm512_mullo_epi32(a, b) }
-    }
-    #[inline(always)]
-    unsafe fn u32_to_f(a: __m512i) -> __m512 {
-        unsafe { _mm512_cvtepu32_ps(a) }
-    }
-    #[inline(always)]
-    unsafe fn add_64(lo: __m512i, hi: __m512i, dlo: __m512i, dhi: __m512i) -> (__m512i, __m512i) {
-        unsafe {
-            let lo = _mm512_add_epi32(lo, dlo);
-            let carry = _mm512_cmplt_epu32_mask(lo, dlo);
-            let hi = _mm512_add_epi32(hi, dhi);
-            (
-                lo,
-                _mm512_mask_add_epi32(hi, carry, hi, _mm512_set1_epi32(1)),
-            )
-        }
-    }
-    #[inline(always)]
-    unsafe fn load_pairs(data: &[f32], idx: &[i32], off: usize) -> (__m512, __m512) {
-        unsafe {
-            debug_assert!(idx.len() >= 16);
-            macro_rules! q {
-                ($k:expr) => {
-                    pair(data, idx, off, $k)
-                };
-            }
-            let a = _mm512_set_epi64(q!(7), q!(6), q!(5), q!(4), q!(3), q!(2), q!(1), q!(0));
-            let b = _mm512_set_epi64(q!(15), q!(14), q!(13), q!(12), q!(11), q!(10), q!(9), q!(8));
-            let (a, b) = (_mm512_castsi512_ps(a), _mm512_castsi512_ps(b));
-            let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
-            let odd = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
-            (
-                _mm512_permutex2var_ps(a, even, b),
-                _mm512_permutex2var_ps(a, odd, b),
-            )
-        }
-    }
 }
 
 /// AVX2: 8 lanes; masks are all-ones / all-zeros lanes.
@@ -311,6 +276,10 @@ unsafe impl Lanes for Avx2 {
             )
         }
     }
+}
+
+#[cfg(target_arch = "x86_64")]
+unsafe impl SampleLanes for Avx2 {
     #[inline(always)]
     unsafe fn splat_f(x: f32) -> __m256 {
         unsafe { _mm256_set1_ps(x) }
@@ -386,7 +355,7 @@ mod tests {
     /// `u32_to_f`, `add_64` and `load_pairs` of `L` against their scalar definitions on values
     /// where rounding and carries matter.
     #[inline(always)]
-    unsafe fn check<L: Lanes>() {
+    unsafe fn check<L: SampleLanes>() {
         unsafe {
             let w = L::W;
             let edge: [u32; 16] = [
@@ -469,14 +438,11 @@ mod tests {
         }
     }
 
-    #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
-    unsafe fn check_avx512() {
-        unsafe { check::<Avx512>() }
-    }
-
-    #[target_feature(enable = "avx2")]
-    unsafe fn check_avx2() {
-        unsafe { check::<Avx2>() }
+    crate::simd::wide_kernels! {
+        // The AVX2 operations, also as the AVX-512 path compiles them.
+        unsafe fn []();
+        check_avx2 => { unsafe { check::<Avx2>() } }
+        check_avx512 => { unsafe { check::<Avx2>() } }
     }
 
     #[test]

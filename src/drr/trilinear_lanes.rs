@@ -11,10 +11,10 @@
 //! runs in the lanes.
 //!
 //! The eight corners are four x pairs `(x, x + 1)`, each read with one 64-bit scalar load and
-//! split into two vectors ([`Lanes::load_pairs`]): on AMD Zen 4 gathering them (eight gathers
-//! per block) was no faster than the per-ray loop, even on a volume that fits in cache.
+//! split into two vectors ([`SampleLanes::load_pairs`]): on AMD Zen 4 gathering them (eight
+//! gathers per block) was no faster than the per-ray loop, even on a volume that fits in cache.
 
-use super::lanes::Lanes;
+use super::lanes::SampleLanes;
 
 /// Lanes of the widest path.
 const MAXW: usize = 16;
@@ -28,7 +28,7 @@ const MAXW: usize = 16;
 /// `n[0] n[1] n[2] < 2^31` values, `n[a] >= 2`; every position satisfies
 /// `0 <= p[a] + k dp[a] < (n[a] - 1) 2^32` on each axis (so all 8 neighbours are in the grid).
 #[inline(always)]
-pub(crate) unsafe fn march<L: Lanes>(
+pub(crate) unsafe fn march<L: SampleLanes>(
     data: &[f32],
     n: [usize; 3],
     p: [i64; 3],
@@ -136,6 +136,7 @@ crate::simd::wide_kernels! {
     // Blocks of 8 samples here too: with the paths timed in turns, blocks of 16 measured slower
     // on the AP view of the CT (1.13-1.15x the per-ray loop against 1.32-1.36x) and a little
     // faster on the lateral one (1.30-1.31x against 1.22-1.30x), so AVX-512 brings its encoding
-    // and 32 registers, not the width.
+    // and 32 registers, not the width (the 16-lane operations are in the history of
+    // `drr/lanes.rs`).
     march_avx512 => { unsafe { march::<super::lanes::Avx2>(data, n, p, dp, count) } }
 }
