@@ -51,38 +51,40 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         peak_all * 1e-9,
         peak_core * 1e-9
     );
-    // MLP at the NAF width.
-    let naf = FieldConfig::preset("naf", VIEWS)?;
-    let paths: Vec<Simd> = if simd == Simd::Scalar {
-        vec![simd]
-    } else {
-        vec![simd, Simd::Scalar]
-    };
+    // The MLP at the NAF width (widest path and scalar) and at the NeRF width (widest path).
     let mut mlp_frac = None;
-    for p in paths {
-        let m = time_mlp(&naf, p, args.reps)?;
-        if p == simd {
-            mlp_frac = Some((m.flops / m.wall / peak_all, m.flops / m.cpu / peak_core));
+    for (label, preset) in [("NAF", "naf"), ("NeRF", "nerf")] {
+        let cfg = FieldConfig::preset(preset, VIEWS)?;
+        let paths: Vec<Simd> = if simd == Simd::Scalar || preset == "nerf" {
+            vec![simd]
+        } else {
+            vec![simd, Simd::Scalar]
+        };
+        for p in paths {
+            let m = time_mlp(&cfg, p, args.reps)?;
+            if p == simd && preset == "naf" {
+                mlp_frac = Some((m.flops / m.wall / peak_all, m.flops / m.cpu / peak_core));
+            }
+            let g = m.flops / m.wall;
+            let gc = m.flops / m.cpu;
+            println!(
+                "MLP forward + backward, {label} width ({} x {} x {} layers, skip {:?}), {} rows, \
+                 {} path: {:.1} Mflop in {:.2} ms = {:.1} Gflop/s wall ({:.0}% of the \
+                 {threads}-thread peak), {:.1} Gflop/s per busy core ({:.0}% of the per-core peak)",
+                cfg.hidden_dim,
+                cfg.hidden_dim,
+                cfg.num_layers,
+                cfg.skips,
+                m.rows,
+                p.name(),
+                m.flops * 1e-6,
+                m.wall * 1e3,
+                g * 1e-9,
+                100.0 * g / peak_all,
+                gc * 1e-9,
+                100.0 * gc / peak_core
+            );
         }
-        let g = m.flops / m.wall;
-        let gc = m.flops / m.cpu;
-        println!(
-            "MLP forward + backward, NAF width ({} x {} x {} layers, skip {:?}), {} rows, {} \
-             path: {:.1} Mflop in {:.2} ms = {:.1} Gflop/s wall ({:.0}% of the {threads}-thread \
-             peak), {:.1} Gflop/s per busy core ({:.0}% of the per-core peak)",
-            naf.hidden_dim,
-            naf.hidden_dim,
-            naf.num_layers,
-            naf.skips,
-            m.rows,
-            p.name(),
-            m.flops * 1e-6,
-            m.wall * 1e3,
-            g * 1e-9,
-            100.0 * g / peak_all,
-            gc * 1e-9,
-            100.0 * gc / peak_core
-        );
     }
     println!(
         "per iteration (ms): stage columns are CPU time summed over the threads (sample = \

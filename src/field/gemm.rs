@@ -1,16 +1,24 @@
 //! The matrix products of the field MLP: one strided kernel
 //! `C[i][j] = init[i][j] + sum_t A(i, t) B[t][j]` (t in order), cache-blocked over rows and
 //! over the inner dimension, register-tiled (a tile of rows x columns held in registers across
-//! an inner block), and compiled three times from the same source: for the baseline target
-//! ([`Simd::Scalar`], 4 x 8 tiles of SSE2 vectors), with AVX2 ([`Simd::Avx2`], 6 x 16: two
-//! 8-lane vectors per row) and with AVX-512 ([`Simd::Avx512`], 6 x 64: four 16-lane vectors per
-//! row, so one broadcast of `A` feeds four multiplies; on Zen 4 this runs the NeRF-width layers
-//! about 12 % faster than 8 x 32). Column remainders narrower than a tile run the same vector
-//! tile, one, two or four vectors wide, on a zero-padded copy
-//! of the last columns of `B` (a per-thread buffer reused across calls), and products with a
-//! single column or a few columns and a column-major `A` (`dW` of the output layer) keep
-//! consecutive rows of `C` in the vector lanes instead, so no shape falls back to scalar chains
-//! stored to memory at every step.
+//! an inner block), and compiled three times: for the baseline target ([`Simd::Scalar`], 4 x 8
+//! tiles of SSE2 vectors) and with AVX2 ([`Simd::Avx2`], 6 x 16: two 8-lane vectors per row)
+//! from the same generic source, and with AVX-512 ([`Simd::Avx512`]) from intrinsics: 24 x 16,
+//! one 16-lane vector per row, so that each `A(i, t)` feeds a single multiply and its broadcast
+//! is folded into that multiply's memory operand. On Zen 4 a separate broadcast instruction
+//! takes a slot of the floating-point pipes: the earlier 6 x 64 tile (one broadcast for four
+//! multiplies) ran at about 75 % of the measured peak in isolation, the 24 x 16 tile at the
+//! peak, which took the NeRF-width products from about 70 % to about 90 % of the peak.
+//!
+//! The panels of `B` (the tile's columns over the whole inner dimension) are first copied into
+//! contiguous rows, once per product (a per-thread buffer reused across calls): rows of `B` a
+//! power of two apart (1 KiB at the NeRF width) map to a few sets of the L1 cache and evict each
+//! other, so tiles reading them in place fetch the panel from L2 on every pass. The column
+//! remainder is copied zero-padded to a narrower tile class (the padding columns are computed
+//! and dropped), and products with a single column or
+//! a few columns and a column-major `A` (`dW` of the output layer) keep consecutive rows of `C`
+//! in the vector lanes instead, so no shape falls back to scalar chains stored to memory at
+//! every step.
 //!
 //! Each element of `C` is one chain of IEEE-754 operations: start from its initial value, then
 //! for t = 0, 1, ... multiply `A(i, t) B[t][j]` and add (a separate multiply and add, never
@@ -35,12 +43,12 @@ use std::cell::RefCell;
 use crate::real::Real;
 use crate::simd::Simd;
 
-/// Rows per cache block (the rows of `A` of a block stay in L2 while the panels of `B` pass
+/// Rows per cache block (a multiple of every path's tile height) (the rows of `A` of a block stay in L2 while the panels of `B` pass
 /// through L1).
 const MC: usize = 96;
 
-/// Inner-dimension block: a `KC x NR` slice of a panel of `B` (16 KiB at `NR` = 32) stays in
-/// L1 while every tile of a row block runs over it.
+/// Inner-dimension block: a `KC x NR` slice of a packed panel of `B` (8 KiB at `NR` = 16)
+/// stays in L1 while every tile of a row block runs over it (256 measured no faster).
 const KC: usize = 128;
 
 /// Layout of the left operand: `A(i, t) = a[i * row_stride + t * col_stride]`.
@@ -66,17 +74,17 @@ struct Operands<'a> {
 }
 
 thread_local! {
-    /// The zero-padded remainder panel of `B` of the calling thread (grown once, reused by
-    /// every product).
+    /// The packed panels of `B` of the calling thread (grown once, reused by every product).
     static PANEL: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
 }
 
 /// Cache-blocked product with `MR x NR` register tiles (tiles with fewer rows at the bottom
-/// edge of a row block use the same kernel with fewer rows). Full column panels read `B` in
-/// place; the column remainder is copied into a panel of `NR` (more than `NM` columns left),
-/// `NM` (more than `NH`) or `NH` columns padded with zeros, so that it runs the same vector kernel (the padding
-/// columns are computed and dropped). A product with fewer than `NH` columns whose `A` is
-/// column-major (`row_stride` 1: `dW` of the output layer) runs [`narrow`] instead.
+/// edge of a row block use the same kernel with fewer rows), or with the AVX-512 tiles of
+/// [`zmm`] when `Z`. The panels of `B` are packed first: full panels of `NR` columns, the
+/// column remainder padded with zeros to `NR` (more than `NM` columns left), `NM` (more than
+/// `NH`) or `NH` columns, so that it runs the same vector kernel. A product with fewer than
+/// `NH` columns whose `A` is column-major (`row_stride` 1: `dW` of the output layer) runs
+/// [`narrow`] instead.
 #[inline(always)]
 fn kernel_generic<
     const MR: usize,
@@ -85,6 +93,7 @@ fn kernel_generic<
     const NH: usize,
     const L: usize,
     const V: usize,
+    const Z: bool,
 >(
     o: Operands,
     c: &mut [f32],
@@ -100,9 +109,13 @@ fn kernel_generic<
     if o.nn < NH && o.al.row_stride == 1 {
         return narrow::<L, V>(&o, c);
     }
-    // The remainder panel: columns `jr ..` (`jw` of them) in `pw` padded columns. The buffer
-    // is taken out of the thread-local cell (and put back) rather than used in a closure, so
-    // that the tiles compile with the instruction set of the caller.
+    // Every panel of `B` is copied once into contiguous rows: the full panels (`NR` columns),
+    // then the remainder (`jw` columns) padded with zeros to its tile class `pw` (the padding
+    // columns are computed and dropped). Rows of `B` a power of two apart (1 KiB at the NeRF
+    // width) fall into a few sets of the L1 cache and evict each other, so tiles reading a
+    // panel in place fetch it from L2 on every pass. The buffer is taken out of the
+    // thread-local cell (and put back) rather than used in a closure, so that the tiles
+    // compile with the instruction set of the caller.
     let jr = o.nn / NR * NR;
     let (pw, jw) = match o.nn - jr {
         0 => (0, 0),
@@ -110,14 +123,21 @@ fn kernel_generic<
         w if w > NH => (NM, w),
         w => (NH, w),
     };
-    // A remainder exactly as wide as its tile class is read in place, as a full panel is.
-    let in_place = jw == pw;
-    let mut buf = PANEL.with(|cell| cell.take());
-    if pw > 0 && !in_place {
-        buf.clear();
-        buf.resize(o.kk * pw, 0.0);
-        for t in 0..o.kk {
-            buf[t * pw..t * pw + jw].copy_from_slice(&o.b[t * o.ldb + jr..t * o.ldb + jr + jw]);
+    let mut packed = PANEL.with(|cell| cell.take());
+    let len = o.kk * (jr + pw);
+    if packed.len() < len {
+        packed.resize(len, 0.0);
+    }
+    let (full, rest) = packed[..len].split_at_mut(o.kk * jr);
+    for (p, panel) in full.chunks_exact_mut(o.kk * NR).enumerate() {
+        for (t, row) in panel.chunks_exact_mut(NR).enumerate() {
+            row.copy_from_slice(&o.b[t * o.ldb + p * NR..][..NR]);
+        }
+    }
+    if pw > 0 {
+        for (t, row) in rest.chunks_exact_mut(pw).enumerate() {
+            row[..jw].copy_from_slice(&o.b[t * o.ldb + jr..][..jw]);
+            row[jw..].fill(0.0);
         }
     }
     let mut i0 = 0;
@@ -135,26 +155,22 @@ fn kernel_generic<
                     k0,
                     k1,
                 };
+                // Row `k0` of this panel (full panels first, then the remainder).
+                let bp = packed[o.kk * j0 + k0 * w..].as_ptr();
                 let mut i = i0;
                 while i < i1 {
                     let iw = (i1 - i).min(MR);
-                    // SAFETY: `kernel` checked that every index of the product is in bounds
-                    // (an in-place remainder reads columns `j0 .. nn` of `B`); the padded panel
-                    // holds `kk x pw` values.
+                    // SAFETY: `kernel` checked that every index of the product is in bounds;
+                    // the packed panel holds `kk x w` values from `bp - k0 w`.
                     unsafe {
-                        if j0 < jr {
-                            let bp = o.b.as_ptr().add(k0 * o.ldb + j0);
-                            tile_rows::<MR, NR>(&o, bp, o.ldb, c, i, iw, s)
+                        if Z {
+                            #[cfg(target_arch = "x86_64")]
+                            zmm::rows(&o, bp, w, c, i, iw, s);
                         } else {
-                            let (bp, ldp) = if in_place {
-                                (o.b.as_ptr().add(k0 * o.ldb + j0), o.ldb)
-                            } else {
-                                (buf.as_ptr().add(k0 * pw), pw)
-                            };
                             match w {
-                                w if w == NR => tile_rows::<MR, NR>(&o, bp, ldp, c, i, iw, s),
-                                w if w == NM => tile_rows::<MR, NM>(&o, bp, ldp, c, i, iw, s),
-                                _ => tile_rows::<MR, NH>(&o, bp, ldp, c, i, iw, s),
+                                w if w == NR => tile_rows::<MR, NR>(&o, bp, w, c, i, iw, s),
+                                w if w == NM => tile_rows::<MR, NM>(&o, bp, w, c, i, iw, s),
+                                _ => tile_rows::<MR, NH>(&o, bp, w, c, i, iw, s),
                             }
                         }
                     };
@@ -166,7 +182,7 @@ fn kernel_generic<
         }
         i0 = i1;
     }
-    PANEL.with(|cell| cell.replace(buf));
+    PANEL.with(|cell| cell.replace(packed));
 }
 
 /// The columns `j0 .. j0 + jw` and the inner range `k0 .. k1` of a tile.
@@ -289,6 +305,100 @@ unsafe fn tile<const R: usize, const W: usize>(
     }
 }
 
+/// The AVX-512 tiles: `R` rows of one 16-column panel, one 16-lane accumulator per row, so
+/// that `A(i + r, t)` is used once per step and its broadcast is folded into the multiply
+/// (`vmulps zmm, zmm, m32{1to16}`). On Zen 4 a separate broadcast instruction takes a slot of
+/// the floating-point pipes; with it folded, 24 rows run at the measured peak of separate
+/// multiplies and adds (wider tiles that reuse one broadcast for several vectors need it in a
+/// register). Same operations per element as [`tile`]: start from the initial value, then
+/// `acc += A(i + r, t) * B[t][j]` for `t` in order, unfused.
+#[cfg(target_arch = "x86_64")]
+mod zmm {
+    use super::{Operands, Span};
+    use std::arch::x86_64::*;
+
+    /// Rows `i .. i + iw` of a 16-column panel, as tiles of 24, 16, 8, 4, 2 and 1 rows.
+    ///
+    /// # Safety
+    /// As [`super::tile_rows`] with `W` = 16; the CPU has AVX-512 F.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn rows(
+        o: &Operands,
+        bp: *const f32,
+        ldp: usize,
+        c: &mut [f32],
+        i: usize,
+        iw: usize,
+        s: Span,
+    ) {
+        let (mut i, end) = (i, i + iw);
+        while i < end {
+            // SAFETY: as this function's contract; each tile's rows are inside `i .. end`.
+            i += unsafe {
+                match end - i {
+                    24.. => tile::<24>(o, bp, ldp, c, i, s),
+                    16.. => tile::<16>(o, bp, ldp, c, i, s),
+                    8.. => tile::<8>(o, bp, ldp, c, i, s),
+                    4.. => tile::<4>(o, bp, ldp, c, i, s),
+                    2.. => tile::<2>(o, bp, ldp, c, i, s),
+                    _ => tile::<1>(o, bp, ldp, c, i, s),
+                }
+            };
+        }
+    }
+
+    /// One `R x 16` tile (the first `s.jw` columns are read and stored, through masks);
+    /// returns `R`.
+    ///
+    /// # Safety
+    /// As [`rows`].
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    unsafe fn tile<const R: usize>(
+        o: &Operands,
+        bp: *const f32,
+        ldp: usize,
+        c: &mut [f32],
+        i: usize,
+        s: Span,
+    ) -> usize {
+        // SAFETY: as this function's contract; masked lanes are neither read nor written.
+        unsafe {
+            let mask: __mmask16 = if s.jw >= 16 {
+                0xffff
+            } else {
+                (1u16 << s.jw) - 1
+            };
+            let cp = c.as_mut_ptr();
+            let mut acc = [_mm512_setzero_ps(); R];
+            for (r, v) in acc.iter_mut().enumerate() {
+                let src = match o.bias {
+                    Some(bv) if s.k0 == 0 => bv.as_ptr().add(s.j0),
+                    _ => cp.add((i + r) * o.ldc + s.j0) as *const f32,
+                };
+                *v = _mm512_maskz_loadu_ps(mask, src);
+            }
+            let (rs, cs) = (o.al.row_stride, o.al.col_stride);
+            let mut ap = o.a.as_ptr().add(i * rs + s.k0 * cs);
+            let mut bp = bp;
+            for _ in s.k0..s.k1 {
+                let b = _mm512_loadu_ps(bp);
+                bp = bp.add(ldp);
+                for (r, v) in acc.iter_mut().enumerate() {
+                    let p = _mm512_mul_ps(_mm512_set1_ps(*ap.add(r * rs)), b);
+                    *v = _mm512_add_ps(*v, p);
+                }
+                ap = ap.add(cs);
+            }
+            for (r, v) in acc.iter().enumerate() {
+                _mm512_mask_storeu_ps(cp.add((i + r) * o.ldc + s.j0), mask, *v);
+            }
+            R
+        }
+    }
+}
+
 /// A product with few columns and a column-major `A` (`A(i, t) = a[i + t * col_stride]`):
 /// `L` consecutive rows of one column of `C` are the accumulators (vector lanes), so each
 /// element keeps its own chain over `t` in order; rows left over run `V` (one vector) or one at a time.
@@ -340,18 +450,17 @@ crate::simd::wide_kernels! {
     kernel_avx2 => {
         // 6 x 16: 12 accumulators of 8 lanes, two of B, a broadcast and a product (16
         // registers).
-        kernel_generic::<6, 16, 16, 8, 32, 8>(o, c)
+        kernel_generic::<6, 16, 16, 8, 32, 8, false>(o, c)
     }
     kernel_avx512 => {
-        // 6 x 64: 24 accumulators of 16 lanes, four of B, a broadcast and a product (30 of the
-        // 32 registers); remainder panels of 32 and 16 columns.
-        kernel_generic::<6, 64, 32, 16, 64, 16>(o, c)
+        // 24 x 16 (the `zmm` tiles): 24 accumulators of 16 lanes, one of B, a product.
+        kernel_generic::<24, 16, 16, 16, 64, 16, true>(o, c)
     }
 }
 
 fn kernel_scalar(o: Operands, c: &mut [f32]) {
     // 4 x 8: 8 accumulators of 4 SSE2 lanes.
-    kernel_generic::<4, 8, 8, 4, 16, 4>(o, c)
+    kernel_generic::<4, 8, 8, 4, 16, 4, false>(o, c)
 }
 
 /// Check the bounds of the product once, then run the kernel of `simd` (or the widest
