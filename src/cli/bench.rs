@@ -15,7 +15,8 @@
 //! - `field`: the neural-field baselines ([`crate::field::bench`]): the peak f32 rate of
 //!   independent multiplies and adds on one and on all threads, the MLP forward + backward at
 //!   the NAF width (rows = the preset's rays x samples) in Gflop/s and as a fraction of that
-//!   peak (AVX2 and scalar paths), each preset's per-iteration time split into stages, and the
+//!   peak (the widest path and the scalar path) and at the NeRF width (the widest path), each
+//!   preset's per-iteration time split into stages, and the
 //!   process's peak resident memory after the full NAF configuration's iterations.
 //!
 //! - `train`: where one training iteration of the `unispine` preset goes
