@@ -8,17 +8,17 @@
 //! is folded into that multiply's memory operand. On Zen 4 a separate broadcast instruction
 //! takes a slot of the floating-point pipes: the earlier 6 x 64 tile (one broadcast for four
 //! multiplies) ran at about 75 % of the measured peak in isolation, the 24 x 16 tile at the
-//! peak, which took the NeRF-width products from about 70 % to about 90 % of the peak.
+//! peak (with the packing below, the reduced NeRF iteration went from 0.56 to 0.48 s,
+//! `docs/measurements.md`).
 //!
 //! The panels of `B` (the tile's columns over the whole inner dimension) are first copied into
 //! contiguous rows, once per product (a per-thread buffer reused across calls): rows of `B` a
 //! power of two apart (1 KiB at the NeRF width) map to a few sets of the L1 cache and evict each
 //! other, so tiles reading them in place fetch the panel from L2 on every pass. The column
 //! remainder is copied zero-padded to a narrower tile class (the padding columns are computed
-//! and dropped), and products with a single column or
-//! a few columns and a column-major `A` (`dW` of the output layer) keep consecutive rows of `C`
-//! in the vector lanes instead, so no shape falls back to scalar chains stored to memory at
-//! every step.
+//! and dropped), and products with a single column or a few columns and a column-major `A`
+//! (`dW` of the output layer) keep consecutive rows of `C` in the vector lanes instead, so no
+//! shape falls back to scalar chains stored to memory at every step.
 //!
 //! Each element of `C` is one chain of IEEE-754 operations: start from its initial value, then
 //! for t = 0, 1, ... multiply `A(i, t) B[t][j]` and add (a separate multiply and add, never
@@ -43,8 +43,8 @@ use std::cell::RefCell;
 use crate::real::Real;
 use crate::simd::Simd;
 
-/// Rows per cache block (a multiple of every path's tile height) (the rows of `A` of a block stay in L2 while the panels of `B` pass
-/// through L1).
+/// Rows per cache block, a multiple of every path's tile height (the rows of `A` of a block
+/// stay in L2 while the panels of `B` pass through L1).
 const MC: usize = 96;
 
 /// Inner-dimension block: a `KC x NR` slice of a packed panel of `B` (8 KiB at `NR` = 16)
@@ -164,8 +164,11 @@ fn kernel_generic<
                     // the packed panel holds `kk x w` values from `bp - k0 w`.
                     unsafe {
                         if Z {
+                            // `Z` is set only by `kernel_avx512` (x86-64 with AVX-512 F).
                             #[cfg(target_arch = "x86_64")]
                             zmm::rows(&o, bp, w, c, i, iw, s);
+                            #[cfg(not(target_arch = "x86_64"))]
+                            unreachable!("AVX-512 tiles on a non-x86-64 target");
                         } else {
                             match w {
                                 w if w == NR => tile_rows::<MR, NR>(&o, bp, w, c, i, iw, s),
