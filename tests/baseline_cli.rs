@@ -106,6 +106,14 @@ fn bad_method_settings_are_named() {
     );
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("--iters"));
+    let o = unispine(
+        &[
+            "train", "--data", "ph", "--method", "fdk", "--rays", "all", "--out", "x",
+        ],
+        d,
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--rays"));
     // A Gaussian training setting given to a baseline is an error naming it (it used to be
     // ignored).
     for (method, flag, value) in [
@@ -145,6 +153,18 @@ fn a_field_run_follows_its_seed() {
     };
     let a = model("1", "a");
     assert_eq!(a, model("1", "b"));
+    // `--rays all` reaches the run and its label.
+    ok(
+        &[
+            "train", "--data", "ph", "--method", "naf", "--iters", "2", "--seed", "1", "--rays",
+            "all", "--out", "all",
+        ],
+        d,
+    );
+    let m = std::fs::read_to_string(d.join("all/metrics.json")).unwrap();
+    assert!(m.contains("\"naf (reduced, all pixels)\""), "{m}");
+    let c = std::fs::read_to_string(d.join("all/config.json")).unwrap();
+    assert!(c.contains("\"ray_pixels\": \"all\""), "{c}");
     assert_ne!(a, model("2", "c"));
     assert_ne!(a, model("0", "e"));
     // FDK draws nothing at random: the seed is accepted and changes nothing.

@@ -36,6 +36,7 @@ use crate::drr::{self, Projector};
 use crate::error::{Error, Result};
 use crate::eval::{self, EvalResult, ViewMetrics};
 use crate::field::encode::VmLines;
+use crate::field::RayPixels;
 use crate::field::{EncoderConfig, FieldConfig};
 use crate::fsio;
 use crate::image2d::Image2d;
@@ -400,7 +401,7 @@ type ModelWriter = Box<dyn Fn(&Path) -> Result<()>>;
 
 /// The `unispine train` flags a baseline run takes besides `--data`, `--out` and `--method`
 /// (the other settings are the Gaussian trainer's; a baseline run given one is an error).
-pub const FLAGS: [&str; 4] = ["iters", "seed", "vm-lines", "threads"];
+pub const FLAGS: [&str; 5] = ["iters", "seed", "vm-lines", "rays", "threads"];
 
 /// The `unispine train` flags that only baselines read (declared here so that reproduction
 /// plans know them too).
@@ -410,6 +411,12 @@ pub struct BaselineFlags {
     /// the plane at (0, w) instead of the line vector) or `corrected` (the line vector).
     #[arg(long, value_enum)]
     pub vm_lines: Option<VmLines>,
+    /// The pixels a neural field's training rays are drawn from: `positive` (default; the
+    /// upstream trainers' pixels with projection > 0, which leaves space crossed only by
+    /// background rays unconstrained) or `all` (every pixel; not an upstream setting, labelled
+    /// `all pixels` in tables).
+    #[arg(long, value_enum)]
+    pub rays: Option<RayPixels>,
 }
 
 /// Settings of a baseline run beyond its preset.
@@ -422,6 +429,9 @@ pub struct BaselineOptions {
     pub seed: Option<u64>,
     /// TensoRF's line factor (`tensorf*` presets only; default the preset's, `upstream`).
     pub vm_lines: Option<VmLines>,
+    /// The pixels a field's rays are drawn from (default the upstream `positive`; an error for
+    /// FDK).
+    pub rays: Option<RayPixels>,
     /// Stop a field run (with a checkpoint) once this many iterations are done.
     pub stop_after: Option<usize>,
 }
@@ -460,6 +470,12 @@ pub fn run(
                     "fdk is a single pass (no iterations)",
                 ));
             }
+            if opts.rays.is_some() {
+                return Err(Error::invalid(
+                    "--rays",
+                    "fdk uses every pixel of every view (no ray sampling)",
+                ));
+            }
             let (o, vol) = run_fdk(ds)?;
             (
                 o,
@@ -482,6 +498,9 @@ pub fn run(
             }
             if let Some(seed) = opts.seed {
                 cfg.seed = seed;
+            }
+            if let Some(r) = opts.rays {
+                cfg.ray_pixels = r;
             }
             if let (Some(l), EncoderConfig::TensorVm { lines, .. }) =
                 (opts.vm_lines, &mut cfg.encoder)

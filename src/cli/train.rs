@@ -298,6 +298,7 @@ fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
         iters: args.iters,
         seed: args.overrides.seed,
         vm_lines: args.baseline.vm_lines,
+        rays: args.baseline.rays,
         stop_after: args.stop_after,
     };
     // FDK is one pass and keeps the default signal behaviour.
@@ -318,6 +319,7 @@ fn resume_field(run: &Path, args: &TrainArgs) -> anyhow::Result<()> {
     if args.out.is_some()
         || args.iters.is_some()
         || args.baseline.vm_lines.is_some()
+        || args.baseline.rays.is_some()
         || !args.overrides.given().is_empty()
     {
         bail!(

@@ -89,6 +89,26 @@ pub enum EncoderConfig {
     DenseGrid { resolution: usize, features: usize },
 }
 
+/// Which pixels a training batch draws its rays from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum RayPixels {
+    /// Pixels with projection > 0 (SAX-NeRF / naf_cbct `src/dataset/tigre.py`): space crossed
+    /// only by background rays is never constrained.
+    #[default]
+    Positive,
+    /// Every pixel of the view (not an upstream setting).
+    All,
+}
+
+impl RayPixels {
+    /// The upstream default (not written to `config.json`, so configurations written before
+    /// the setting existed read and hash the same).
+    pub fn is_positive(&self) -> bool {
+        *self == RayPixels::Positive
+    }
+}
+
 /// Every setting of a field run.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FieldConfig {
@@ -101,8 +121,11 @@ pub struct FieldConfig {
     pub num_layers: usize,
     pub skips: Vec<usize>,
     pub last_activation: OutAct,
-    /// Rays per iteration (`n_rays`), sampled among pixels with projection > 0.
+    /// Rays per iteration (`n_rays`), sampled among the pixels of `ray_pixels`.
     pub n_rays: usize,
+    /// The pixels rays are drawn from (upstream: projection > 0).
+    #[serde(default, skip_serializing_if = "RayPixels::is_positive")]
+    pub ray_pixels: RayPixels,
     /// Samples per ray (`n_samples`; NeRF's `n_samples + n_fine`, all stratified).
     pub n_samples: usize,
     /// Iterations (SAX-NeRF: epochs x training views).
@@ -236,6 +259,7 @@ impl FieldConfig {
             skips: vec![skip],
             last_activation: act,
             n_rays: rays,
+            ray_pixels: RayPixels::Positive,
             n_samples: samples,
             iterations: epochs * nv,
             lr: 1e-3,
@@ -304,12 +328,14 @@ impl FieldConfig {
         )
     }
 
-    /// The name for tables: the preset, with ` (reduced)` for reduced presets.
+    /// The name for tables: the preset, with ` (reduced)` for reduced presets and
+    /// `all pixels` when rays are drawn from every pixel (not the upstream sampling).
     pub fn label(&self) -> String {
-        if self.reduced {
-            format!("{} (reduced)", self.preset)
-        } else {
-            self.preset.clone()
+        match (self.reduced, self.ray_pixels) {
+            (true, RayPixels::Positive) => format!("{} (reduced)", self.preset),
+            (true, RayPixels::All) => format!("{} (reduced, all pixels)", self.preset),
+            (false, RayPixels::Positive) => self.preset.clone(),
+            (false, RayPixels::All) => format!("{} (all pixels)", self.preset),
         }
     }
 

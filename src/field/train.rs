@@ -2,7 +2,8 @@
 //! - iteration `it` (1-based) uses training projection `(it - 1) mod N` (DataLoader with
 //!   batch 1, no shuffle: views in angular order);
 //! - `n_rays` pixels drawn without replacement among the pixels with projection > 0 (all of
-//!   them when fewer), seeded per iteration;
+//!   them when fewer), seeded per iteration; among every pixel with
+//!   [`RayPixels::All`](super::RayPixels::All) (not an upstream setting);
 //! - target: the projection in metres of the [0, 1]-normalised volume, i.e. our line integral
 //!   (mm x value) / (1000 x the dataset volume's maximum value; 1 when the dataset has no
 //!   volume);
@@ -28,7 +29,7 @@ use super::adam::FlatAdam;
 use super::checkpoint::FieldCheckpoint;
 use super::mlp::Cache;
 use super::render::{self, Ray, MM};
-use super::{Field, FieldConfig};
+use super::{Field, FieldConfig, RayPixels};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::geometry::ConeBeam;
@@ -377,7 +378,7 @@ pub struct FieldTrainer<'a> {
     pub adam: FlatAdam<f32>,
     pub sched: StepLr,
     pub iteration: usize,
-    /// Per training view: indices of the pixels with projection > 0.
+    /// Per training view: indices of the pixels rays are drawn from (projection > 0, or all).
     valid: Vec<Vec<u32>>,
     scale: f64,
     near_far: (f64, f64),
@@ -403,7 +404,7 @@ impl<'a> FieldTrainer<'a> {
             .iter()
             .map(|p| {
                 (0..p.data.len() as u32)
-                    .filter(|&i| p.data[i as usize] > 0.0)
+                    .filter(|&i| cfg.ray_pixels == RayPixels::All || p.data[i as usize] > 0.0)
                     .collect()
             })
             .collect();
@@ -541,5 +542,62 @@ impl<'a> FieldTrainer<'a> {
         (0..self.ds.test.angles.len())
             .step_by(self.cfg.eval_stride)
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dataset::generate::{generate, GenerateOptions};
+
+    /// A small cube in the middle of an empty volume: views with background pixels.
+    fn dataset() -> Dataset {
+        let mut vol = crate::volume::Volume::<f32>::zeros([16, 16, 16], [4.0; 3]);
+        for z in 6..10 {
+            for y in 6..10 {
+                for x in 6..10 {
+                    vol.data[(z * 16 + y) * 16 + x] = 0.02;
+                }
+            }
+        }
+        let opts = GenerateOptions {
+            train_views: 2,
+            test_views: 1,
+            detector: 16,
+            ..Default::default()
+        };
+        generate(&vol, &opts, &|_, _| {}).unwrap()
+    }
+
+    #[test]
+    fn rays_come_from_positive_pixels_or_from_all() {
+        let ds = dataset();
+        let proj = &ds.train.projections[0];
+        let n_pix = proj.data.len();
+        let n_pos = proj.data.iter().filter(|&&v| v > 0.0).count();
+        assert!(0 < n_pos && n_pos < n_pix / 2, "{n_pos} of {n_pix}");
+        let mut cfg = FieldConfig::preset("intratomo", 2).unwrap();
+        // More rays than pixels: a batch is every pixel it may draw from.
+        cfg.n_rays = 10 * n_pix;
+        let tr = FieldTrainer::new(cfg.clone(), &ds).unwrap();
+        let (view, rays, targets) = tr.batch(1);
+        assert_eq!((view, rays.len()), (0, n_pos));
+        assert!(targets.iter().all(|&t| t > 0.0));
+        cfg.ray_pixels = RayPixels::All;
+        let tr = FieldTrainer::new(cfg.clone(), &ds).unwrap();
+        let (_, rays, targets) = tr.batch(1);
+        assert_eq!(rays.len(), n_pix);
+        assert_eq!(targets.iter().filter(|&&t| t > 0.0).count(), n_pos);
+        // The upstream default is not written to config.json (older configurations read and
+        // hash the same); `all` is, and reads back.
+        let mut up = cfg.clone();
+        up.ray_pixels = RayPixels::Positive;
+        let json = serde_json::to_string(&up).unwrap();
+        assert!(!json.contains("ray_pixels"), "{json}");
+        let json = serde_json::to_string(&cfg).unwrap();
+        assert!(json.contains("\"ray_pixels\":\"all\""), "{json}");
+        let back: FieldConfig = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, cfg);
+        assert_eq!(cfg.label(), "intratomo (reduced, all pixels)");
     }
 }

@@ -164,6 +164,14 @@ fn baseline_cells_get_their_seed_and_only_the_flags_they_take() {
     assert_eq!(args_of(&pre, "unispine")[3], "10");
     let n = parse(&BASELINES.replace("seeds", "field_iters = 7\nseeds")).unwrap();
     assert_eq!(args_of(&n, "naf")[3], "7");
+    // A variant drawing a field's rays from every pixel.
+    let all = parse(&BASELINES.replace("vm_lines = \"corrected\"", "rays = \"all\"")).unwrap();
+    assert_eq!(
+        args_of(&all, "tv")[6..],
+        s(&["--rays", "all"])[..],
+        "{:?}",
+        args_of(&all, "tv")
+    );
 }
 
 #[test]
