@@ -16,8 +16,8 @@
 //!   independent multiplies and adds on one and on all threads, the MLP forward + backward at
 //!   the NAF width (rows = the preset's rays x samples) in Gflop/s and as a fraction of that
 //!   peak (the widest path and the scalar path) and at the NeRF width (the widest path), each
-//!   preset's per-iteration time split into stages, and the
-//!   process's peak resident memory after the full NAF configuration's iterations.
+//!   preset's per-iteration time split into stages, and the process's peak resident memory
+//!   after the full NAF configuration's iterations.
 //!
 //! - `train`: where one training iteration of the `unispine` preset goes
 //!   ([`crate::audit::train_bench`]): ms and % of the step per stage at each detector size,

@@ -1,6 +1,6 @@
 //! The measurements of `unispine bench field`: the machine's peak f32 rate, the MLP's matrix
-//! products at the NAF and NeRF widths against it, the per-iteration time of each field preset split into
-//! stages, and the peak memory of the full NAF configuration.
+//! products at the NAF and NeRF widths against it, the per-iteration time of each field preset
+//! split into stages, and the peak memory of the full NAF configuration.
 //!
 //! Inputs are synthetic but shaped like a training iteration: the rays of random pixels of a
 //! 128 x 128 cone-beam view of the 256 mm benchmark box ([`crate::audit::bench::bench_geometry`]),
