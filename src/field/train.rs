@@ -3,7 +3,7 @@
 //!   batch 1, no shuffle: views in angular order);
 //! - `n_rays` pixels drawn without replacement among the pixels with projection > 0 (all of
 //!   them when fewer), seeded per iteration; among every pixel with
-//!   [`RayPixels::All`](super::RayPixels::All) (not an upstream setting);
+//!   [`RayPixels::All`] (not an upstream setting);
 //! - target: the projection in metres of the [0, 1]-normalised volume, i.e. our line integral
 //!   (mm x value) / (1000 x the dataset volume's maximum value; 1 when the dataset has no
 //!   volume);
