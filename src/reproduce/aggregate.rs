@@ -223,6 +223,7 @@ pub fn observations(rows: &[Row]) -> Vec<Obs> {
         .filter_map(|r| {
             Some(Obs {
                 key: format!("{}/{}/{}", r.dataset, r.seed, o(&r.sweep_value)),
+                paper_dataset: r.paper_dataset.clone(),
                 method: r.method.clone(),
                 psnr: r.psnr?,
                 train_time_s: r.train_time_s.unwrap_or(f64::NAN),
@@ -504,7 +505,8 @@ pub fn tables_md(
     }
     let _ = writeln!(
         s,
-        "\nPairs: cells of A and B that completed on the same dataset and seed{}. Accuracy: d = \
+        "\nPairs: cells of A and B that completed on the same dataset and seed{}; a claim the \
+         paper makes for one dataset pairs only the plan datasets standing in for it. Accuracy: d = \
          PSNR(A) - PSNR(B); speed: d = ln(speed ratio), shown as the ratio, tested against the \
          paper's factor. Interval: paired t, mean(d) ± t(0.975, n-1) · sd(d) / sqrt(n). \
          Reproduced: the interval lies wholly above the paper's threshold (0 dB, or ln of the \
