@@ -67,12 +67,11 @@ pub(crate) unsafe trait SampleLanes: Lanes {
     /// of the low halves goes to the high ones.
     unsafe fn add_64(lo: Self::I, hi: Self::I, dlo: Self::I, dhi: Self::I) -> (Self::I, Self::I);
     /// Lane k gets the pair `data[idx[k] + off]`, `data[idx[k] + off + 1]`: the first values in
-    /// one vector, the second ones in the other (one 64-bit scalar load per lane: on AMD Zen 4
-    /// a gather is slower).
+    /// one vector, the second ones in the other.
     ///
     /// # Safety
-    /// `idx[k] + off + 1 < data.len()` for every lane `k < W`.
-    unsafe fn load_pairs(data: &[f32], idx: &[i32], off: usize) -> (Self::F, Self::F);
+    /// `0 <= idx[k]` and `idx[k] + off + 1 < data.len()` for every lane `k < W`.
+    unsafe fn load_pairs(data: &[f32], idx: Self::I, off: usize) -> (Self::F, Self::F);
 }
 
 /// AVX-512 F/BW/DQ/VL: 16 lanes.
@@ -310,9 +309,12 @@ unsafe impl SampleLanes for Avx2 {
         }
     }
     #[inline(always)]
-    unsafe fn load_pairs(data: &[f32], idx: &[i32], off: usize) -> (__m256, __m256) {
+    unsafe fn load_pairs(data: &[f32], idx: __m256i, off: usize) -> (__m256, __m256) {
+        // One 64-bit scalar load per lane (the compiler takes the indices out of the vector).
         unsafe {
-            debug_assert!(idx.len() >= 8);
+            let mut at = [0i32; 8];
+            Self::store_i(idx, &mut at);
+            let idx = &at;
             macro_rules! q {
                 ($k:expr) => {
                     pair(data, idx, off, $k)
@@ -426,8 +428,8 @@ mod tests {
                 }
             }
             let data: Vec<f32> = (0..64).map(|i| i as f32 * 0.5 - 3.0).collect();
-            let idx: Vec<i32> = (0..w as i32).map(|k| (k * 7) % 50).collect();
-            let (a, b) = L::load_pairs(&data, &idx, 3);
+            let idx: Vec<i32> = (0..16).map(|k| (k * 7) % 50).collect();
+            let (a, b) = L::load_pairs(&data, L::load_i(&idx), 3);
             let (mut fa, mut fb) = ([0.0f32; 16], [0.0f32; 16]);
             L::store_f(a, &mut fa);
             L::store_f(b, &mut fb);

@@ -151,7 +151,7 @@ impl<'a, R: Real> Projector<'a, R> {
         crate::geometry::check_view(&cam, (self.grid.lo, self.grid.hi))?;
         let (w, h) = (cam.width, cam.height);
         let mut data = vec![R::zero(); w * h];
-        let setup = trilinear::Setup::new(&self.grid, self.geo.accuracy).with_simd(self.simd);
+        let setup = trilinear::Setup::new(&self.grid, self.geo.accuracy);
         let cols_inner = cols_inner(&self.grid, &cam);
         let hits: Vec<usize> = data
             .par_chunks_mut(w * BAND)
@@ -166,6 +166,10 @@ impl<'a, R: Real> Projector<'a, R> {
                     })
                 }
                 Method::Trilinear => {
+                    if let Some((grid, out)) = lanes_f32(self.simd, &self.grid, out) {
+                        let band = (out, w, b * BAND);
+                        return trilinear_band(self.simd, &grid, &setup, &cam, band, cols_inner);
+                    }
                     for_each_pixel(out, w, b * BAND, TILE, cols_inner, |col, row| {
                         trilinear::pixel(&self.grid, &setup, &cam, col, row)
                     })
@@ -243,15 +247,25 @@ fn tile_order(
     tile: usize,
     cols_inner: bool,
 ) -> impl Iterator<Item = (usize, usize)> {
-    (0..w).step_by(tile).flat_map(move |c0| {
-        let tw = (c0 + tile).min(w) - c0;
-        (0..tw * rows).map(move |k| {
-            if cols_inner {
-                (c0 + k % tw, k / tw)
-            } else {
-                (c0 + k / rows, k % rows)
-            }
-        })
+    (0..w)
+        .step_by(tile)
+        .flat_map(move |c0| tile_pixels(c0, (c0 + tile).min(w) - c0, rows, cols_inner))
+}
+
+/// The pixels of the tile of columns `c0..c0 + tw` of a band of `rows` rows as `(col, row in
+/// band)`, in the order of [`for_each_pixel`].
+fn tile_pixels(
+    c0: usize,
+    tw: usize,
+    rows: usize,
+    cols_inner: bool,
+) -> impl Iterator<Item = (usize, usize)> {
+    (0..tw * rows).map(move |k| {
+        if cols_inner {
+            (c0 + k % tw, k / tw)
+        } else {
+            (c0 + k / rows, k % rows)
+        }
     })
 }
 
@@ -288,6 +302,73 @@ fn siddon_band(
     unreachable!("vector paths exist on x86-64 only");
     drop(rays);
     hits
+}
+
+/// The trilinear ray-march on the vector lanes of `simd` for the band `(out, w, row0)` (rows of
+/// `w` pixels, the first one being `row0`); returns the number of rays that met the box. Tile by
+/// tile: each ray's per-ray part ([`trilinear::plan`], [`trilinear::finish`]) runs as in the
+/// per-ray loop, and the inner loops of the tile's rays run on the lanes, one ray per lane.
+fn trilinear_band(
+    simd: Simd,
+    grid: &Grid<f32>,
+    setup: &trilinear::Setup,
+    cam: &Camera,
+    (out, w, row0): (&mut [f32], usize, usize),
+    cols_inner: bool,
+) -> usize {
+    let rows = out.len() / w;
+    let mut hits = 0;
+    let mut plans = Vec::with_capacity(TILE * rows);
+    let mut inner = vec![0.0f32; TILE * rows];
+    for c0 in (0..w).step_by(TILE) {
+        plans.clear();
+        for (col, r) in tile_pixels(c0, (c0 + TILE).min(w) - c0, rows, cols_inner) {
+            plans.push((r * w + col, trilinear::plan(grid, setup, cam, col, row0 + r)));
+        }
+        // Marches of 2^31 samples or more (a step far below the voxel size) stay per ray.
+        let lanes = |m: &trilinear::March| m.count > 0 && m.count < 1 << 31;
+        for (k, (_, p)) in plans.iter().enumerate() {
+            inner[k] = if lanes(&p.march) {
+                0.0
+            } else {
+                trilinear::march_scalar(grid, &p.march)
+            };
+        }
+        let mut rays = plans
+            .iter()
+            .enumerate()
+            .filter(|(_, (_, p))| lanes(&p.march))
+            .map(|(k, (_, p))| (k, p.march));
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `simd` is supported (`or_narrower`); the grid has fewer than 2^31 voxels
+        // (`lanes_f32`); every march comes from `trilinear::plan` on this grid with a count in
+        // [1, 2^31); every slot `k` is in `inner` (one per pixel of the tile).
+        unsafe {
+            match simd {
+                Simd::Avx512 => trilinear_lanes::run_avx512(grid.data, grid.n, &mut rays, &mut inner),
+                Simd::Avx2 => trilinear_lanes::run_avx2(grid.data, grid.n, &mut rays, &mut inner),
+                Simd::Scalar => unreachable!("the scalar path runs the per-ray loop"),
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        unreachable!("vector paths exist on x86-64 only");
+        drop(rays);
+        for (k, (slot, p)) in plans.iter().enumerate() {
+            out[*slot] = trilinear::finish(grid, p, inner[k]);
+            hits += p.hit as usize;
+        }
+    }
+    hits
+}
+
+/// A `dyn Iterator` as a sized one (the ray source is called once per ray, not per step).
+struct DynIter<'a, T>(&'a mut dyn Iterator<Item = T>);
+
+impl<T> Iterator for DynIter<'_, T> {
+    type Item = T;
+    fn next(&mut self) -> Option<T> {
+        self.0.next()
+    }
 }
 
 /// Image rows per parallel task. With a tile of `BAND` x `TILE` rays the voxels read by one tile

@@ -172,16 +172,6 @@ crate::simd::wide_kernels! {
         out: &mut [f32],
     );
     // SAFETY (both): as this function.
-    run_avx2 => { unsafe { run::<super::lanes::Avx2>(data, &mut DynIter(rays), out) } }
-    run_avx512 => { unsafe { run::<super::lanes::Avx512>(data, &mut DynIter(rays), out) } }
-}
-
-/// A `dyn Iterator` as a sized one (the ray source is called once per ray, not per step).
-struct DynIter<'a, T>(&'a mut dyn Iterator<Item = T>);
-
-impl<T> Iterator for DynIter<'_, T> {
-    type Item = T;
-    fn next(&mut self) -> Option<T> {
-        self.0.next()
-    }
+    run_avx2 => { unsafe { run::<super::lanes::Avx2>(data, &mut super::DynIter(rays), out) } }
+    run_avx512 => { unsafe { run::<super::lanes::Avx512>(data, &mut super::DynIter(rays), out) } }
 }

@@ -25,10 +25,9 @@
 use super::{clip_ray, Grid};
 use crate::geometry::{Camera, Mode};
 use crate::real::Real;
-use crate::simd::Simd;
 
 /// The ray-march of the ray through pixel (`col`, `row`), and whether that ray met the volume
-/// box.
+/// box (the per-ray loop of every path that is not the vector lanes').
 #[inline]
 pub(crate) fn pixel<R: Real>(
     grid: &Grid<R>,
@@ -37,8 +36,9 @@ pub(crate) fn pixel<R: Real>(
     col: usize,
     row: usize,
 ) -> (R, bool) {
-    let (o, d, h, hit) = ray(grid, setup, cam, col, row);
-    (integrate(grid, setup, cam, o, d, h), hit)
+    let plan = plan(grid, setup, cam, col, row);
+    let inner = march_scalar(grid, &plan.march);
+    (finish(grid, &plan, inner), plan.hit)
 }
 
 /// The ray through pixel (`col`, `row`): origin, direction, step, and whether it meets the
@@ -82,8 +82,6 @@ pub(crate) struct Setup {
     outer: ([f64; 3], [f64; 3]),
     /// Box of voxel centres (all 8 neighbours inside), or `None` if an axis has 1 voxel.
     inner: Option<([f64; 3], [f64; 3])>,
-    /// Instruction set of the inner loop ([`super::trilinear_lanes`] unless scalar).
-    simd: Simd,
 }
 
 impl Setup {
@@ -102,45 +100,84 @@ impl Setup {
             h0: accuracy * grid.s[0].min(grid.s[1]).min(grid.s[2]),
             outer: (olo, ohi),
             inner: grid.n.iter().all(|&n| n >= 2).then_some((ilo, ihi)),
-            simd: Simd::Scalar,
         }
-    }
-
-    /// The same set-up with the inner loop on `simd` (supported; f32 volumes only, others
-    /// stay scalar).
-    pub(crate) fn with_simd(mut self, simd: Simd) -> Self {
-        self.simd = simd;
-        self
     }
 }
 
-/// `h x sum` of the zero-padded trilinear interpolant at `o + i h d` over all integers `i`
-/// (`i >= 0` for a cone beam).
-#[inline]
-pub(crate) fn integrate<R: Real>(
+/// The fast path of one ray: the samples at the 32.32 fixed-point positions `p + k dp`,
+/// `0 <= k < count` (voxel units x 2^32, voxel centres at integers), every one with its 8
+/// neighbours inside the grid. `count` is 0 when the ray has no such sample.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct March {
+    pub p: [i64; 3],
+    pub dp: [i64; 3],
+    pub count: usize,
+}
+
+/// One ray's ray-march split around its fast path: [`plan`] sums the zero-padded samples before
+/// it, the inner loop's sum comes from [`march_scalar`] or the vector lanes
+/// ([`super::trilinear_lanes`], the same bits), and [`finish`] adds the rest in the per-ray
+/// order: `h x (((before + inner) + moved) + after_1 + after_2 + ...)`.
+pub(crate) struct Plan<R: Real> {
+    /// The ray met the volume box.
+    pub hit: bool,
+    /// The fast path (count 0 when there is none).
+    pub march: March,
+    /// Step (mm).
+    h: f64,
+    /// Continuous voxel index of sample `i`: `q0 + i dq`.
+    q0: [f64; 3],
+    dq: [f64; 3],
+    /// Sum of the samples before the fast range (or of all samples when there is none).
+    before: R,
+    /// Whether the ray has a fast range (then the inner sum and `moved` are added).
+    fast: bool,
+    /// Sum of the fast range's end samples that rounding put outside the centre box (they
+    /// take the zero-padded path).
+    moved: R,
+    /// The samples after the fast range, `after.0..=after.1` (empty if `after.0 > after.1`).
+    after: (i64, i64),
+}
+
+/// The ray through pixel (`col`, `row`) up to its fast path (see [`Plan`]).
+pub(crate) fn plan<R: Real>(
     grid: &Grid<R>,
     setup: &Setup,
     cam: &Camera,
-    o: [f64; 3],
-    d: [f64; 3],
-    h: f64,
-) -> R {
+    col: usize,
+    row: usize,
+) -> Plan<R> {
+    let (o, d, h, hit) = ray(grid, setup, cam, col, row);
+    let mut plan = Plan {
+        hit,
+        march: March {
+            p: [0; 3],
+            dp: [0; 3],
+            count: 0,
+        },
+        h,
+        q0: [0.0; 3],
+        dq: [0.0; 3],
+        before: R::zero(),
+        fast: false,
+        moved: R::zero(),
+        after: (1, 0),
+    };
     let Some((ta, tb)) = clip_ray(cam, o, d, setup.outer.0, setup.outer.1) else {
-        return R::zero();
+        return plan;
     };
     let i_lo = (ta / h).ceil() as i64;
     let i_hi = (tb / h).floor() as i64;
     if i_hi < i_lo {
-        return R::zero();
+        return plan;
     }
     // Continuous voxel-index coordinates (voxel centres at integers) of sample i:
     // q(i) = q0 + i * dq.
-    let mut q0 = [0.0f64; 3];
-    let mut dq = [0.0f64; 3];
     for a in 0..3 {
-        q0[a] = (o[a] - grid.lo[a]) / grid.s[a] - 0.5;
-        dq[a] = h * d[a] / grid.s[a];
+        plan.q0[a] = (o[a] - grid.lo[a]) / grid.s[a] - 0.5;
+        plan.dq[a] = h * d[a] / grid.s[a];
     }
+    let (q0, dq) = (plan.q0, plan.dq);
     // Fast range [j_lo, j_hi] of samples inside the box of voxel centres.
     let (j_lo, j_hi) = match setup.inner {
         Some((ilo, ihi)) => match clip_ray(cam, o, d, ilo, ihi) {
@@ -157,18 +194,32 @@ pub(crate) fn integrate<R: Real>(
         for i in i_lo..j_lo {
             acc += sample_padded(grid, at(q0, dq, i));
         }
-        let mut padded = R::zero();
-        acc += march_inner(grid, setup.simd, q0, dq, j_lo, j_hi, &mut padded);
-        acc += padded;
-        for i in j_hi + 1..=i_hi {
-            acc += sample_padded(grid, at(q0, dq, i));
-        }
+        plan.fast = true;
+        plan.march = fast_range(grid, q0, dq, j_lo, j_hi, &mut plan.moved);
+        plan.after = (j_hi + 1, i_hi);
     } else {
         for i in i_lo..=i_hi {
             acc += sample_padded(grid, at(q0, dq, i));
         }
     }
-    acc * R::c(h)
+    plan.before = acc;
+    plan
+}
+
+/// The ray's value: `h x sum` of the zero-padded trilinear interpolant at `o + i h d` over all
+/// integers `i` (`i >= 0` for a cone beam), given the inner loop's sum `inner` of the plan's
+/// fast path.
+#[inline]
+pub(crate) fn finish<R: Real>(grid: &Grid<R>, plan: &Plan<R>, inner: R) -> R {
+    let mut acc = plan.before;
+    if plan.fast {
+        acc += inner;
+        acc += plan.moved;
+    }
+    for i in plan.after.0..=plan.after.1 {
+        acc += sample_padded(grid, at(plan.q0, plan.dq, i));
+    }
+    acc * R::c(plan.h)
 }
 
 #[inline(always)]
@@ -180,27 +231,24 @@ fn at(q0: [f64; 3], dq: [f64; 3], i: i64) -> [f64; 3] {
 /// Fixed-point scale of the fast path: positions in voxel units x 2^32, in `i64`.
 pub(crate) const FIX: f64 = 4294967296.0;
 
-/// Sum of the samples `j_lo..=j_hi` (sample `i` at continuous index `q0 + i dq`), 0 when the range
-/// is empty. Samples outside the fast range go to the zero-padded path and are added
-/// to `padded`. The fast path steps positions in 32.32 fixed point: the position of
-/// sample `j_lo + k` is `p0 + k dp` exactly (integer arithmetic), so it is a linear function of
-/// `k` and lies in `[0, n - 1]` on every axis for all `k` as soon as it does at both ends, which
-/// is checked (end samples that fail move to the zero-padded path; a sample exactly on the last
-/// voxel centre also takes that path). The quantisation of the
-/// start and step (2^-33 voxel) moves a sample by less than 1e-6 voxel over 4000 steps.
-fn march_inner<R: Real>(
+/// The fast path of the samples `j_lo..=j_hi` (sample `i` at continuous index `q0 + i dq`, all
+/// inside the box of voxel centres up to rounding). The fast path steps positions in 32.32 fixed
+/// point: the position of sample `j_lo + k` is `p0 + k dp` exactly (integer arithmetic), so it
+/// is a linear function of `k` and lies in `[0, n - 1]` on every axis for all `k` as soon as it
+/// does at both ends, which is checked: end samples that fail go to the zero-padded path and are
+/// added to `moved` (a sample exactly on the last voxel centre also takes that path). The
+/// quantisation of the start and step (2^-33 voxel) moves a sample by less than 1e-6 voxel over
+/// 4000 steps.
+fn fast_range<R: Real>(
     grid: &Grid<R>,
-    simd: Simd,
     q0: [f64; 3],
     dq: [f64; 3],
     mut j_lo: i64,
     mut j_hi: i64,
-    padded: &mut R,
-) -> R {
+    moved: &mut R,
+) -> March {
     let [nx, ny, nz] = grid.n;
-    let data = grid.data;
-    let nxy = nx * ny;
-    debug_assert!(data.len() == nxy * nz && nx >= 2 && ny >= 2 && nz >= 2);
+    debug_assert!(grid.data.len() == nx * ny * nz && nx >= 2 && ny >= 2 && nz >= 2);
     let lim = [
         (nx as i64 - 1) << 32,
         (ny as i64 - 1) << 32,
@@ -225,27 +273,37 @@ fn march_inner<R: Real>(
     // Move end samples that rounding put outside the centre box to the padded path.
     let mut k_lo = 0i64;
     while j_lo + k_lo <= j_hi && !inside(pos(k_lo)) {
-        *padded += sample_padded(grid, at(q0, dq, j_lo + k_lo));
+        *moved += sample_padded(grid, at(q0, dq, j_lo + k_lo));
         k_lo += 1;
     }
     while j_hi >= j_lo + k_lo && !inside(pos(j_hi - j_lo)) {
-        *padded += sample_padded(grid, at(q0, dq, j_hi));
+        *moved += sample_padded(grid, at(q0, dq, j_hi));
         j_hi -= 1;
     }
     j_lo += k_lo;
-    if j_hi < j_lo {
-        return R::zero();
+    March {
+        p: pos(k_lo),
+        dp,
+        count: if j_hi < j_lo {
+            0
+        } else {
+            (j_hi - j_lo + 1) as usize
+        },
     }
-    let count = (j_hi - j_lo + 1) as usize;
-    if let Some(sum) = march_lanes(grid, simd, pos(k_lo), dp, count) {
-        return sum;
-    }
-    let [mut px, mut py, mut pz] = pos(k_lo);
-    let [dx, dy, dz] = dp;
+}
+
+/// The inner loop's sum, the samples of the fast path `m` added in order (0 when it is
+/// empty), per ray.
+pub(crate) fn march_scalar<R: Real>(grid: &Grid<R>, m: &March) -> R {
+    let [nx, ny, _] = grid.n;
+    let nxy = nx * ny;
+    let data = grid.data;
+    let [mut px, mut py, mut pz] = m.p;
+    let [dx, dy, dz] = m.dp;
     const MASK: i64 = 0xffff_ffff;
     let inv = R::c(1.0 / FIX);
     let mut acc = R::zero();
-    for _ in 0..count {
+    for _ in 0..m.count {
         let ix = (px >> 32) as usize;
         let iy = (py >> 32) as usize;
         let iz = (pz >> 32) as usize;
@@ -256,11 +314,12 @@ fn march_inner<R: Real>(
         py += dy;
         pz += dz;
         let b = ix + nx * iy + nxy * iz;
-        // SAFETY: every position of this loop is p0 + k dp with 0 <= k < count, a linear function
+        // SAFETY: every position of this loop is p + k dp with 0 <= k < count, a linear function
         // of k in exact integer arithmetic (no overflow: |p| < 2^63 for any grid below 2^31
         // voxels per axis) whose two ends satisfy 0 <= p < (n - 1) 2^32 on each axis (checked
-        // above), so every position does: ix <= nx - 2, iy <= ny - 2, iz <= nz - 2, and the
-        // largest index read, b + nxy + nx + 1 <= (nx-1) + nx (ny-1) + nxy (nz-1) = len - 1.
+        // by `fast_range`), so every position does: ix <= nx - 2, iy <= ny - 2, iz <= nz - 2,
+        // and the largest index read, b + nxy + nx + 1 <= (nx-1) + nx (ny-1) + nxy (nz-1) =
+        // len - 1.
         let (c000, c100, c010, c110, c001, c101, c011, c111) = unsafe {
             (
                 *data.get_unchecked(b),
@@ -282,39 +341,6 @@ fn march_inner<R: Real>(
         acc += c0 + fz * (c1 - c0);
     }
     acc
-}
-
-/// The inner loop's sum on the vector lanes of `simd` ([`super::trilinear_lanes`], the same
-/// bits), or `None` where the loop above runs: the scalar path, a volume that is not f32 or has
-/// 2^31 voxels or more.
-#[inline]
-fn march_lanes<R: Real>(
-    grid: &Grid<R>,
-    simd: Simd,
-    p: [i64; 3],
-    dp: [i64; 3],
-    count: usize,
-) -> Option<R> {
-    #[cfg(target_arch = "x86_64")]
-    {
-        let data = super::lane_data(simd, grid.data)?;
-        // SAFETY: `simd` is supported (the projector's `or_narrower`); the grid has fewer than
-        // 2^31 voxels and at least 2 per axis (the fast path's precondition); the caller checked
-        // that both end positions, hence all (linear in k), are inside the centre box.
-        let sum = unsafe {
-            match simd {
-                Simd::Avx512 => super::trilinear_lanes::march_avx512(data, grid.n, p, dp, count),
-                Simd::Avx2 => super::trilinear_lanes::march_avx2(data, grid.n, p, dp, count),
-                Simd::Scalar => return None,
-            }
-        };
-        <R as num_traits::NumCast>::from(sum)
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        let _ = (grid, simd, p, dp, count);
-        None
-    }
 }
 
 #[inline(always)]
