@@ -1,7 +1,7 @@
 //! Vector lanes of the DRR kernels: f32 values, i32 voxel indices.
 //!
 //! The kernels ([`super::siddon_lanes`]: one ray per lane, AVX-512 16 lanes and AVX2 8;
-//! [`super::trilinear_lanes`]: 8 samples of one ray in the lanes on both paths, with the
+//! [`super::trilinear_lanes`]: one ray per lane, 8 lanes on both paths, with the
 //! further operations of [`SampleLanes`]) are written once against [`Lanes`]; the scalar path
 //! runs the per-ray loops of [`super::siddon`] and [`super::trilinear`]. Every lane performs
 //! the IEEE operations of the per-ray loop in the same order (no fused multiply-add anywhere),
@@ -51,7 +51,7 @@ pub(crate) unsafe trait Lanes {
 }
 
 /// The further operations of the trilinear kernel ([`super::trilinear_lanes`]), which runs
-/// blocks of 8 samples on both vector paths: implemented by [`Avx2`] only (the AVX-512 path
+/// 8 lanes on both vector paths: implemented by [`Avx2`] only (the AVX-512 path
 /// calls it from code compiled with AVX-512 enabled).
 ///
 /// # Safety

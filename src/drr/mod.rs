@@ -21,8 +21,9 @@
 //!   run time, [`Projector::with_simd`]): each lane walks one ray with the per-ray loop's
 //!   comparisons and IEEE operations in its order, so every instruction set gives the per-ray
 //!   loop's bits ([`Simd::Scalar`] and f64 volumes run that loop). Trilinear's inner loop runs
-//!   the samples of one ray in the lanes and adds them in the per-ray loop's order, so it too
-//!   gives that loop's bits on every path.
+//!   the same way, one ray per lane (8 lanes on both paths), the rest of each ray (its set-up
+//!   and the zero-padded samples near the box faces) per ray, so it too gives the per-ray
+//!   loop's bits on every path.
 //!
 //! [`Projector::with_simd`]: crate::drr::Projector::with_simd
 //! [`Simd::Scalar`]: crate::simd::Simd::Scalar
@@ -323,7 +324,10 @@ fn trilinear_band(
     for c0 in (0..w).step_by(TILE) {
         plans.clear();
         for (col, r) in tile_pixels(c0, (c0 + TILE).min(w) - c0, rows, cols_inner) {
-            plans.push((r * w + col, trilinear::plan(grid, setup, cam, col, row0 + r)));
+            plans.push((
+                r * w + col,
+                trilinear::plan(grid, setup, cam, col, row0 + r),
+            ));
         }
         // Marches of 2^31 samples or more (a step far below the voxel size) stay per ray.
         let lanes = |m: &trilinear::March| m.count > 0 && m.count < 1 << 31;
@@ -345,7 +349,9 @@ fn trilinear_band(
         // [1, 2^31); every slot `k` is in `inner` (one per pixel of the tile).
         unsafe {
             match simd {
-                Simd::Avx512 => trilinear_lanes::run_avx512(grid.data, grid.n, &mut rays, &mut inner),
+                Simd::Avx512 => {
+                    trilinear_lanes::run_avx512(grid.data, grid.n, &mut rays, &mut inner)
+                }
                 Simd::Avx2 => trilinear_lanes::run_avx2(grid.data, grid.n, &mut rays, &mut inner),
                 Simd::Scalar => unreachable!("the scalar path runs the per-ray loop"),
             }
