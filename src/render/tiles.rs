@@ -8,10 +8,10 @@
 //! `tx0 = floor((u - r) / 16)`, `tx1 = ceil((u + r) / 16)` (exclusive), clamped to the grid, and
 //! the same for rows. The square is computed in f64, so the f32 and f64 paths bin alike.
 //!
-//! The per-tile lists are built by a counting sort over tiles (Gaussians visited in index order,
-//! so each list starts in index order) followed by a sort of each list by the key
-//! (depth in IEEE total order, index). The keys are unique, so the (parallel) sort is
-//! deterministic: the lists are the same for any thread count. 3DGS sorts
+//! The per-tile lists are built by a counting sort over tiles that visits the Gaussians sorted
+//! by the key (depth in IEEE total order, index), so each list comes out in key order. The keys
+//! are unique, so the (parallel) sort is deterministic: the lists are the same for any thread
+//! count. 3DGS sorts
 //! `(tile << 32) | depth_bits` with a stable radix sort, which leaves ties in emission (index)
 //! order: the same order.
 
@@ -135,34 +135,28 @@ pub fn bin<R: Real>(s: &Splats<R>, width: usize, height: usize) -> TileBins {
         counts[t + 1] += counts[t];
     }
     let offsets = counts;
+    // The drawn splats in (depth, index) order (unique keys: the same order for any thread
+    // count); a stable counting sort in that order leaves every tile's list sorted by the key.
+    let mut order: Vec<u64> = rects
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| r.is_some())
+        .map(|(i, _)| sort_key(s.depth[i].f64(), i as u32))
+        .collect();
+    order.par_sort_unstable();
     let mut fill = offsets.clone();
     let mut ids = vec![0u32; offsets[n_tiles]];
-    for (i, r) in rects.iter().enumerate() {
-        if let Some(r) = r {
+    for &k in &order {
+        let i = k as u32;
+        if let Some(r) = rects[i as usize] {
             for ty in r[2]..r[3] {
                 for tx in r[0]..r[1] {
                     let t = ty * tiles_x + tx;
-                    ids[fill[t]] = i as u32;
+                    ids[fill[t]] = i;
                     fill[t] += 1;
                 }
             }
         }
-    }
-    // Per-tile sort by the unique key (depth key, index).
-    let mut keyed: Vec<u64> = ids
-        .iter()
-        .map(|&i| sort_key(s.depth[i as usize].f64(), i))
-        .collect();
-    let mut slices: Vec<&mut [u64]> = Vec::with_capacity(n_tiles);
-    let mut rest: &mut [u64] = &mut keyed;
-    for t in 0..n_tiles {
-        let (a, b) = rest.split_at_mut(offsets[t + 1] - offsets[t]);
-        slices.push(a);
-        rest = b;
-    }
-    slices.par_iter_mut().for_each(|l| l.sort_unstable());
-    for (d, k) in ids.iter_mut().zip(&keyed) {
-        *d = *k as u32;
     }
     TileBins {
         width,
