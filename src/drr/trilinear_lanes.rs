@@ -10,8 +10,10 @@
 //! so the lanes march neighbouring rays through the same cache lines).
 //!
 //! The eight corners are four x pairs `(x, x + 1)`, each read with one 64-bit scalar load and
-//! split into two vectors ([`SampleLanes::load_pairs`]): on AMD Zen 4 gathering them (eight
-//! gathers per step) was no faster than the per-ray loop, even on a volume that fits in cache.
+//! split into two vectors ([`SampleLanes::load_pairs`]): on AMD Zen 4 gathers are slower (eight
+//! gathers of single values per block in the first lane version were no faster than the per-ray
+//! loop, even on a volume that fits in cache; two AVX-512 gathers of pairs per row in this one
+//! were slower than it).
 //!
 //! An earlier version put 8 consecutive samples of one ray in the lanes and added them to the
 //! ray's sum one at a time: the horizontal, serial sum and the extraction of the lanes bounded
