@@ -10,6 +10,9 @@
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
 
+/// Lanes of the widest path (the size of the kernels' per-lane state arrays).
+pub(crate) const MAXW: usize = 16;
+
 /// A vector of `W` f32 lanes, a vector of `W` i32 lanes and a lane mask.
 ///
 /// # Safety
@@ -48,6 +51,84 @@ pub(crate) unsafe trait Lanes {
     /// # Safety
     /// `0 <= idx < data.len()` in every lane of `m`.
     unsafe fn gather(m: Self::M, idx: Self::I, data: &[f32]) -> Self::F;
+    /// The three per-axis vectors of a lane state.
+    #[inline(always)]
+    unsafe fn load3_f(p: &[[f32; MAXW]; 3]) -> [Self::F; 3] {
+        unsafe {
+            [
+                Self::load_f(&p[0]),
+                Self::load_f(&p[1]),
+                Self::load_f(&p[2]),
+            ]
+        }
+    }
+    /// The three per-axis vectors of a lane state.
+    #[inline(always)]
+    unsafe fn load3_i(p: &[[i32; MAXW]; 3]) -> [Self::I; 3] {
+        unsafe {
+            [
+                Self::load_i(&p[0]),
+                Self::load_i(&p[1]),
+                Self::load_i(&p[2]),
+            ]
+        }
+    }
+}
+
+/// The per-lane state of a kernel that runs one ray per lane ([`super::siddon_lanes`],
+/// [`super::trilinear_lanes`]): a lane starts on a ray, and hands its sum over when the ray is
+/// done.
+pub(crate) trait RayLanes {
+    /// A ray as the kernel starts it.
+    type Ray;
+    /// Start lane `k` on `ray`, whose sum goes to `out[slot]`.
+    fn start(&mut self, k: usize, slot: usize, ray: Self::Ray);
+    /// Lane `k`'s slot and sum.
+    fn result(&self, k: usize) -> (usize, f32);
+}
+
+/// Start the first `w` lanes of `s` on the first rays of `rays`; returns the lanes started (bit
+/// k for lane k).
+#[inline(always)]
+pub(crate) fn start_lanes<S: RayLanes>(
+    s: &mut S,
+    w: usize,
+    rays: &mut impl Iterator<Item = (usize, S::Ray)>,
+) -> u32 {
+    let mut active = 0u32;
+    for k in 0..w {
+        let Some((slot, ray)) = rays.next() else {
+            break;
+        };
+        s.start(k, slot, ray);
+        active |= 1 << k;
+    }
+    active
+}
+
+/// The lanes `done` (bits) write their sums to `out` and take the next rays of `rays`; returns
+/// the lanes of `active` still running or restarted.
+#[inline(always)]
+pub(crate) fn hand_over<S: RayLanes>(
+    s: &mut S,
+    mut active: u32,
+    done: u32,
+    rays: &mut impl Iterator<Item = (usize, S::Ray)>,
+    out: &mut [f32],
+) -> u32 {
+    let mut bits = done;
+    while bits != 0 {
+        let k = bits.trailing_zeros() as usize;
+        bits &= bits - 1;
+        let (slot, sum) = s.result(k);
+        out[slot] = sum;
+        active &= !(1 << k);
+        if let Some((slot, ray)) = rays.next() {
+            s.start(k, slot, ray);
+            active |= 1 << k;
+        }
+    }
+    active
 }
 
 /// The further operations of the trilinear kernel ([`super::trilinear_lanes`]), which runs

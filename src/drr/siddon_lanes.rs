@@ -7,11 +7,8 @@
 //! has left the box hands its sum to the image and takes the next ray of the band (rays in tile
 //! order, so the lanes walk neighbouring rays through the same cache lines).
 
-use super::lanes::Lanes;
+use super::lanes::{hand_over, start_lanes, Lanes, RayLanes, MAXW};
 use super::siddon::Walk;
-
-/// Lanes of the widest path.
-const MAXW: usize = 16;
 
 /// The per-lane state, as arrays the vectors are loaded from and stored to when a lane changes
 /// ray.
@@ -39,9 +36,12 @@ impl State {
             slot: [0; MAXW],
         }
     }
+}
 
-    /// Start lane `k` on the walk `w` whose sum goes to `out[slot]`.
-    fn set(&mut self, k: usize, slot: usize, w: Walk<f32>) {
+impl RayLanes for State {
+    type Ray = Walk<f32>;
+
+    fn start(&mut self, k: usize, slot: usize, w: Walk<f32>) {
         for a in 0..3 {
             self.tm[a][k] = w.tm[a];
             self.dt[a][k] = w.dt[a];
@@ -54,6 +54,10 @@ impl State {
         self.t[k] = 0.0;
         self.acc[k] = 0.0;
         self.slot[k] = slot;
+    }
+
+    fn result(&self, k: usize) -> (usize, f32) {
+        (self.slot[k], self.acc[k])
     }
 }
 
@@ -74,39 +78,14 @@ pub(crate) unsafe fn run<L: Lanes>(
         let w = L::W;
         debug_assert!(w <= MAXW && data.len() < (1usize << 31));
         let mut s = State::new();
-        let mut active = 0u32;
-        for k in 0..w {
-            match rays.next() {
-                Some((slot, walk)) => {
-                    s.set(k, slot, walk);
-                    active |= 1 << k;
-                }
-                None => break,
-            }
-        }
+        let mut active = start_lanes(&mut s, w, rays);
         let zero = L::splat_i(0);
         let minus1 = L::splat_i(-1);
         while active != 0 {
-            let (mut tm0, mut tm1, mut tm2) = (
-                L::load_f(&s.tm[0]),
-                L::load_f(&s.tm[1]),
-                L::load_f(&s.tm[2]),
-            );
-            let (dt0, dt1, dt2) = (
-                L::load_f(&s.dt[0]),
-                L::load_f(&s.dt[1]),
-                L::load_f(&s.dt[2]),
-            );
-            let (mut l0, mut l1, mut l2) = (
-                L::load_i(&s.left[0]),
-                L::load_i(&s.left[1]),
-                L::load_i(&s.left[2]),
-            );
-            let (st0, st1, st2) = (
-                L::load_i(&s.step[0]),
-                L::load_i(&s.step[1]),
-                L::load_i(&s.step[2]),
-            );
+            let [mut tm0, mut tm1, mut tm2] = L::load3_f(&s.tm);
+            let [dt0, dt1, dt2] = L::load3_f(&s.dt);
+            let [mut l0, mut l1, mut l2] = L::load3_i(&s.left);
+            let [st0, st1, st2] = L::load3_i(&s.step);
             let mut idx = L::load_i(&s.idx);
             let mut t = L::load_f(&s.t);
             let mut acc = L::load_f(&s.acc);
@@ -146,17 +125,7 @@ pub(crate) unsafe fn run<L: Lanes>(
             L::store_i(idx, &mut s.idx);
             L::store_f(t, &mut s.t);
             L::store_f(acc, &mut s.acc);
-            let mut bits = done;
-            while bits != 0 {
-                let k = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                out[s.slot[k]] = s.acc[k];
-                active &= !(1 << k);
-                if let Some((slot, walk)) = rays.next() {
-                    s.set(k, slot, walk);
-                    active |= 1 << k;
-                }
-            }
+            active = hand_over(&mut s, active, done, rays, out);
         }
     }
 }

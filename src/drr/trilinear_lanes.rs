@@ -19,11 +19,8 @@
 //! ray's sum one at a time: the horizontal, serial sum and the extraction of the lanes bounded
 //! it at about 1.3x the per-ray loop.
 
-use super::lanes::SampleLanes;
+use super::lanes::{hand_over, start_lanes, RayLanes, SampleLanes, MAXW};
 use super::trilinear::March;
-
-/// Lanes of the widest path.
-const MAXW: usize = 16;
 
 /// The per-lane state, as arrays the vectors are loaded from and stored to when a lane changes
 /// ray: the position's low and high halves per axis, the step's, the samples left, the sum and
@@ -50,9 +47,13 @@ impl State {
             slot: [0; MAXW],
         }
     }
+}
 
-    /// Start lane `k` on the march `m` (count >= 1, < 2^31) whose sum goes to `out[slot]`.
-    fn set(&mut self, k: usize, slot: usize, m: &March) {
+impl RayLanes for State {
+    type Ray = March;
+
+    /// (The march's count is in [1, 2^31).)
+    fn start(&mut self, k: usize, slot: usize, m: March) {
         for a in 0..3 {
             self.lo[a][k] = m.p[a] as u32 as i32;
             self.hi[a][k] = (m.p[a] >> 32) as i32;
@@ -62,6 +63,10 @@ impl State {
         self.left[k] = m.count as i32;
         self.acc[k] = 0.0;
         self.slot[k] = slot;
+    }
+
+    fn result(&self, k: usize) -> (usize, f32) {
+        (self.slot[k], self.acc[k])
     }
 }
 
@@ -93,37 +98,12 @@ pub(crate) unsafe fn run<L: SampleLanes>(
         let inv = L::splat_f((1.0 / super::trilinear::FIX) as f32);
         let (zero, minus1) = (L::splat_i(0), L::splat_i(-1));
         let mut s = State::new();
-        let mut active = 0u32;
-        for k in 0..w {
-            match rays.next() {
-                Some((slot, m)) => {
-                    s.set(k, slot, &m);
-                    active |= 1 << k;
-                }
-                None => break,
-            }
-        }
+        let mut active = start_lanes(&mut s, w, rays);
         while active != 0 {
-            let (mut lx, mut ly, mut lz) = (
-                L::load_i(&s.lo[0]),
-                L::load_i(&s.lo[1]),
-                L::load_i(&s.lo[2]),
-            );
-            let (mut hx, mut hy, mut hz) = (
-                L::load_i(&s.hi[0]),
-                L::load_i(&s.hi[1]),
-                L::load_i(&s.hi[2]),
-            );
-            let (dlx, dly, dlz) = (
-                L::load_i(&s.dlo[0]),
-                L::load_i(&s.dlo[1]),
-                L::load_i(&s.dlo[2]),
-            );
-            let (dhx, dhy, dhz) = (
-                L::load_i(&s.dhi[0]),
-                L::load_i(&s.dhi[1]),
-                L::load_i(&s.dhi[2]),
-            );
+            let [mut lx, mut ly, mut lz] = L::load3_i(&s.lo);
+            let [mut hx, mut hy, mut hz] = L::load3_i(&s.hi);
+            let [dlx, dly, dlz] = L::load3_i(&s.dlo);
+            let [dhx, dhy, dhz] = L::load3_i(&s.dhi);
             let mut left = L::load_i(&s.left);
             let mut acc = L::load_f(&s.acc);
             let mut act = L::mask_from_bits(active);
@@ -171,17 +151,7 @@ pub(crate) unsafe fn run<L: SampleLanes>(
             L::store_i(hz, &mut s.hi[2]);
             L::store_i(left, &mut s.left);
             L::store_f(acc, &mut s.acc);
-            let mut bits = done;
-            while bits != 0 {
-                let k = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                out[s.slot[k]] = s.acc[k];
-                active &= !(1 << k);
-                if let Some((slot, m)) = rays.next() {
-                    s.set(k, slot, &m);
-                    active |= 1 << k;
-                }
-            }
+            active = hand_over(&mut s, active, done, rays, out);
         }
     }
 }

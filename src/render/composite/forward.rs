@@ -140,6 +140,24 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
             ]
         };
         let (r0, r1) = (e.y0 as usize - y0, e.y1 as usize - y0);
+        // The 8 lanes of half `h` of tile row `r`. (A macro: a closure would hold the
+        // state it updates borrowed across the loop.)
+        macro_rules! half_row {
+            ($r:expr, $h:expr) => {{
+                let (r, h) = ($r, $h);
+                stats.lanes += 8;
+                let c0 = 8 * h;
+                let act: &[u32; 8] = colm[c0..c0 + 8].try_into().unwrap();
+                let xh: &[R; 8] = xs[c0..c0 + 8].try_into().unwrap();
+                let dy = [R::c((y0 + r) as f64) + half - e.my; 8];
+                let stops = blend_lanes(e, tag, xh, &dy, act, &mut st, r * TILE + c0);
+                if stops.iter().fold(0, |a, &s| a | s) != 0 {
+                    let nd: u32 = stops.iter().sum();
+                    n_done += nd;
+                    half_done[r][h] += nd;
+                }
+            }};
+        }
         if W == 8 {
             for r in r0..r1 {
                 let g = go(r, &half_done);
@@ -147,20 +165,9 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
                     continue;
                 }
                 stats.rows += 1;
-                let dy = [R::c((y0 + r) as f64) + half - e.my; 8];
                 for (h, &gh) in g.iter().enumerate() {
-                    if !gh {
-                        continue;
-                    }
-                    stats.lanes += 8;
-                    let c0 = 8 * h;
-                    let act: &[u32; 8] = colm[c0..c0 + 8].try_into().unwrap();
-                    let xh: &[R; 8] = xs[c0..c0 + 8].try_into().unwrap();
-                    let stops = blend_lanes(e, tag, xh, &dy, act, &mut st, r * TILE + c0);
-                    if stops.iter().fold(0, |a, &s| a | s) != 0 {
-                        let nd: u32 = stops.iter().sum();
-                        n_done += nd;
-                        half_done[r][h] += nd;
+                    if gh {
+                        half_row!(r, h);
                     }
                 }
             }
@@ -174,18 +181,7 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
                 if !(g[0] && g[1]) {
                     // One half to visit: 8 lanes (half the work of 16 where the CPU splits
                     // 512-bit operations in two, as AMD Zen 4 does), the same bits.
-                    let h = g[1] as usize;
-                    stats.lanes += 8;
-                    let c0 = 8 * h;
-                    let act: &[u32; 8] = colm[c0..c0 + 8].try_into().unwrap();
-                    let xh: &[R; 8] = xs[c0..c0 + 8].try_into().unwrap();
-                    let dy = [R::c((y0 + r) as f64) + half - e.my; 8];
-                    let stops = blend_lanes(e, tag, xh, &dy, act, &mut st, r * TILE + c0);
-                    if stops.iter().fold(0, |a, &s| a | s) != 0 {
-                        let nd: u32 = stops.iter().sum();
-                        n_done += nd;
-                        half_done[r][h] += nd;
-                    }
+                    half_row!(r, g[1] as usize);
                     continue;
                 }
                 stats.lanes += TILE as u64;
