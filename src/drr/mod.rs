@@ -307,8 +307,9 @@ fn siddon_band(
 
 /// The trilinear ray-march on the vector lanes of `simd` for the band `(out, w, row0)` (rows of
 /// `w` pixels, the first one being `row0`); returns the number of rays that met the box. Tile by
-/// tile: each ray's per-ray part ([`trilinear::plan`], [`trilinear::finish`]) runs as in the
-/// per-ray loop, and the inner loops of the tile's rays run on the lanes, one ray per lane.
+/// tile ([`LANE_TILE`] columns): each ray's per-ray part ([`trilinear::plan`],
+/// [`trilinear::finish`]) runs as in the per-ray loop, and the inner loops of the tile's rays run
+/// on the lanes, one ray per lane.
 fn trilinear_band(
     simd: Simd,
     grid: &Grid<f32>,
@@ -319,11 +320,11 @@ fn trilinear_band(
 ) -> usize {
     let rows = out.len() / w;
     let mut hits = 0;
-    let mut plans = Vec::with_capacity(TILE * rows);
-    let mut inner = vec![0.0f32; TILE * rows];
-    for c0 in (0..w).step_by(TILE) {
+    let mut plans = Vec::with_capacity(LANE_TILE * rows);
+    let mut inner = vec![0.0f32; LANE_TILE * rows];
+    for c0 in (0..w).step_by(LANE_TILE) {
         plans.clear();
-        for (col, r) in tile_pixels(c0, (c0 + TILE).min(w) - c0, rows, cols_inner) {
+        for (col, r) in tile_pixels(c0, (c0 + LANE_TILE).min(w) - c0, rows, cols_inner) {
             plans.push((
                 r * w + col,
                 trilinear::plan(grid, setup, cam, col, row0 + r),
@@ -384,6 +385,11 @@ impl<T> Iterator for DynIter<'_, T> {
 const BAND: usize = 8;
 /// Columns per tile.
 const TILE: usize = 32;
+/// Columns per tile of the trilinear lanes: as many as the lanes, so that they march one row
+/// of neighbouring rays and refill from the next row. Against tiles of [`TILE`] columns, in
+/// the same runs: AP view 1.47-1.64x the per-ray loop instead of 1.06-1.32x, lateral
+/// 1.76-1.84x instead of 1.63-1.71x.
+const LANE_TILE: usize = 8;
 
 /// Fill the band `out` (whole image rows, the first one being `row0`, `w` pixels each) with
 /// `f(col, row) = (value, hit)` tile by tile: for each block of `tile` columns, row by row
