@@ -330,15 +330,9 @@ fn trilinear_band(
                 trilinear::plan(grid, setup, cam, col, row0 + r),
             ));
         }
-        // Marches of 2^31 samples or more (a step far below the voxel size) stay per ray.
+        // Empty marches, and marches of 2^31 samples or more (a step far below the voxel
+        // size), stay per ray.
         let lanes = |m: &trilinear::March| m.count > 0 && m.count < 1 << 31;
-        for (k, (_, p)) in plans.iter().enumerate() {
-            inner[k] = if lanes(&p.march) {
-                0.0
-            } else {
-                trilinear::march_scalar(grid, &p.march)
-            };
-        }
         let mut rays = plans
             .iter()
             .enumerate()
@@ -361,7 +355,12 @@ fn trilinear_band(
         unreachable!("vector paths exist on x86-64 only");
         drop(rays);
         for (k, (slot, p)) in plans.iter().enumerate() {
-            out[*slot] = trilinear::finish(grid, p, inner[k]);
+            let sum = if lanes(&p.march) {
+                inner[k]
+            } else {
+                trilinear::march_scalar(grid, &p.march)
+            };
+            out[*slot] = trilinear::finish(grid, p, sum);
             hits += p.hit as usize;
         }
     }

@@ -146,15 +146,15 @@ pub fn bin<R: Real>(s: &Splats<R>, width: usize, height: usize) -> TileBins {
     order.par_sort_unstable();
     let mut fill = offsets.clone();
     let mut ids = vec![0u32; offsets[n_tiles]];
-    for &k in &order {
-        let i = k as u32;
-        if let Some(r) = rects[i as usize] {
-            for ty in r[2]..r[3] {
-                for tx in r[0]..r[1] {
-                    let t = ty * tiles_x + tx;
-                    ids[fill[t]] = i;
-                    fill[t] += 1;
-                }
+    for (i, r) in order
+        .iter()
+        .filter_map(|&k| Some((k as u32, rects[k as u32 as usize]?)))
+    {
+        for ty in r[2]..r[3] {
+            for tx in r[0]..r[1] {
+                let t = ty * tiles_x + tx;
+                ids[fill[t]] = i;
+                fill[t] += 1;
             }
         }
     }
