@@ -2,11 +2,14 @@
 //!
 //! The hot kernels (the compositor of `render::composite`) are written once, as plain Rust over
 //! fixed-width lane arrays, and compiled several times: for the baseline target ([`Simd::Scalar`],
-//! SSE2 on x86-64), with AVX2 enabled ([`Simd::Avx2`], 8 f32 lanes) and with AVX-512 enabled
-//! ([`Simd::Avx512`], 16 f32 lanes). Every lane performs the same IEEE-754 operations in the same
-//! order in every version (Rust never fuses a multiply and an add unless asked to, and no path
-//! calls `mul_add`), so all paths give the same bits; the tests force each path the CPU supports
-//! and compare bits.
+//! SSE2 on x86-64), with AVX2 and FMA enabled ([`Simd::Avx2`], 8 f32 lanes) and with AVX-512 and
+//! FMA enabled ([`Simd::Avx512`], 16 f32 lanes). Every lane performs the same IEEE-754 operations
+//! in the same order in every version, so all paths give the same bits; the tests force each path
+//! the CPU supports and compare bits. Rust never fuses a multiply and an add by itself; where the
+//! kernels ask for a fused multiply-add (`mul_add`, one rounding) the AVX2 and AVX-512 versions
+//! run the FMA instruction and the baseline version calls the C library's `fma` / `fmaf`, which
+//! is also correctly rounded: the same bits, at a cost (the compositor's scalar path is about
+//! 5 x slower than with separate multiplies and adds, see `docs/measurements.md`).
 //!
 //! [`Simd::active`] is the widest path the CPU supports, capped by the environment variable
 //! `UNISPINE_SIMD` (`scalar`, `avx2` or `avx512`) when it is set to one of those names (other
@@ -19,9 +22,9 @@ use std::sync::OnceLock;
 pub enum Simd {
     /// The baseline target (SSE2 on x86-64; whatever the target has elsewhere).
     Scalar,
-    /// x86-64 AVX2 (8 f32 lanes).
+    /// x86-64 AVX2 and FMA (8 f32 lanes).
     Avx2,
-    /// x86-64 AVX-512 F/BW/DQ/VL (16 f32 lanes).
+    /// x86-64 AVX-512 F/BW/DQ/VL and FMA (16 f32 lanes).
     Avx512,
 }
 
@@ -48,13 +51,16 @@ impl Simd {
         match self {
             Simd::Scalar => true,
             #[cfg(target_arch = "x86_64")]
-            Simd::Avx2 => std::is_x86_feature_detected!("avx2"),
+            Simd::Avx2 => {
+                std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
+            }
             #[cfg(target_arch = "x86_64")]
             Simd::Avx512 => {
                 std::is_x86_feature_detected!("avx512f")
                     && std::is_x86_feature_detected!("avx512bw")
                     && std::is_x86_feature_detected!("avx512dq")
                     && std::is_x86_feature_detected!("avx512vl")
+                    && std::is_x86_feature_detected!("fma")
             }
             #[cfg(not(target_arch = "x86_64"))]
             _ => false,
@@ -103,10 +109,10 @@ impl Simd {
     }
 }
 
-/// Two copies of a kernel entry point with one signature: the first compiled with AVX2 enabled,
-/// the second with AVX-512 F/BW/DQ/VL (the features [`Simd::supported`] checks), each running its
-/// own body. The bodies call `#[inline(always)]` generic code, which is then compiled for that
-/// instruction set; the functions are `unsafe` to call (the CPU must have the features) and exist
+/// Two copies of a kernel entry point with one signature: the first compiled with AVX2 and FMA
+/// enabled, the second with AVX-512 F/BW/DQ/VL and FMA (the features [`Simd::supported`]
+/// checks), each running its own body. The bodies call `#[inline(always)]` generic code, which is
+/// then compiled for that instruction set; the functions are `unsafe` to call (the CPU must have the features) and exist
 /// on x86-64 only.
 ///
 /// ```text
@@ -129,12 +135,12 @@ macro_rules! wide_kernels {
     ) => {
         $(#[$meta])*
         #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2")]
+        #[target_feature(enable = "avx2,fma")]
         $vis unsafe fn $avx2<$($gen)*>($($arg: $ty),*) $(-> $ret)? $b2
 
         $(#[$meta])*
         #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl")]
+        #[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,fma")]
         $vis unsafe fn $avx512<$($gen)*>($($arg: $ty),*) $(-> $ret)? $b5
     };
 }
@@ -146,7 +152,7 @@ pub(crate) use wide_kernels;
 const PEAK_LANES: usize = 96;
 
 /// One thread's share of [`peak_flops`]: `iters` rounds of `x <- x * m + c` (a multiply and a
-/// separate add, as in the kernels) on [`PEAK_LANES`] accumulators. Returns a value that
+/// separate add, like most of the kernels' operations) on [`PEAK_LANES`] accumulators. Returns a value that
 /// depends on every accumulator so the work is not optimised away.
 #[inline(always)]
 fn peak_loop(iters: u64, m: f32, c: f32) -> f32 {

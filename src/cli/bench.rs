@@ -170,9 +170,10 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
     }
     let fpb = composite::FLOPS_PER_BLEND_FORWARD + composite::FLOPS_PER_BLEND_BACKWARD;
     println!(
-        "arithmetic limit = blends x {fpb} flops (forward {} + backward {}, counted from the \
-         kernels) / peak per core / threads (the wall time of an idle machine); 'of limit' = \
-         blends x {fpb} flops / peak per core over the forward + backward CPU time",
+        "arithmetic limit = blends x {fpb} operations (forward {} + backward {}, counted from the \
+         kernels; a fused multiply-add counts as one) / peak per core / threads (the wall time \
+         of an idle machine); 'of limit' = blends x {fpb} operations / peak per core over the \
+         forward + backward CPU time",
         composite::FLOPS_PER_BLEND_FORWARD,
         composite::FLOPS_PER_BLEND_BACKWARD
     );

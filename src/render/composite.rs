@@ -75,14 +75,16 @@ pub const T_MIN: f64 = 1e-4;
 /// Pixels per tile.
 const TP: usize = TILE * TILE;
 
-/// Floating-point operations (adds, multiplies, divisions, compares and min/selects on floats) per
+/// Floating-point operations (adds, multiplies, fused multiply-adds, divisions, compares and
+/// min/selects on floats; a fused multiply-add counts as one, as it takes one multiply pipe) per
 /// pixel lane of the forward kernel, counted from its source, without the ones that are the same
-/// for a whole tile row (hoisted out of the lane loop): dx and Eq. (4)'s exponent 8, `exp_f32` 24,
-/// opacity and clamp 2, transmittance 2, three tests 3, Eq. (5)'s colour 3.
-pub const FLOPS_PER_BLEND_FORWARD: u64 = 42;
-/// The same count for the backward kernel: dx, exponent, exp and alpha 34, three tests 3, T
-/// recovery 3, dL/dalpha 8, the two running sums 6, d(power) and the six gradient lanes 20.
-pub const FLOPS_PER_BLEND_BACKWARD: u64 = 74;
+/// for a whole tile row or entry (hoisted out of the lane loop): dx and Eq. (4)'s exponent 3,
+/// `exp_f32` 16, opacity and clamp 2, transmittance 2, three tests 3, Eq. (5)'s colour 2.
+pub const FLOPS_PER_BLEND_FORWARD: u64 = 28;
+/// The same count for the backward kernel: dx, exponent, exp and alpha 21, three tests 3, T
+/// recovery 3, dL/dalpha 6, the colour behind 2, d(power) and the seven gradient lanes 14, their
+/// seven column sums 7.
+pub const FLOPS_PER_BLEND_BACKWARD: u64 = 56;
 
 /// The compositor's phases in the order they run, reported to the probe of [`forward_probed`]
 /// (`Bin` to `Assemble`) and [`backward_probed`] (`BackwardTiles`, `Reduce`) as each ends (the

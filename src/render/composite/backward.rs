@@ -6,7 +6,7 @@
 
 use rayon::prelude::*;
 
-use super::super::lanes::{exp_k, mask, power_of, sel};
+use super::super::lanes::{add_blend, exp_k, mask, power_of, sel};
 use super::super::tiles::TILE;
 use super::super::SplatGrads;
 use super::dispatch::{self, Kernel};
@@ -266,8 +266,8 @@ fn lane<R: Real, const W: usize>(
     let valid = row.act[k] & mask(ju < row.last[k]) & mask(pw <= zero) & mask(alpha >= amin);
     let inv = one / (one - alpha);
     let tk = tc * inv;
-    let d_alpha = gp * (e.col * tk - bh * inv) - gp * bg * row.tfin[k] * inv;
-    row.behind[k] = sel(valid, bh + e.col * alpha * tk, bh);
+    let d_alpha = gp * (e.col.mul_add(tk, -(bh * inv)) - bg * row.tfin[k] * inv);
+    row.behind[k] = sel(valid, add_blend(bh, e.col, alpha, tk), bh);
     row.tcur[k] = sel(valid, tk, tc);
     // Clamp active (o G > 0.99): d alpha / d (o G) = 0.
     let live = valid & mask(og <= amax);
@@ -276,8 +276,8 @@ fn lane<R: Real, const W: usize>(
         valid,
         live,
         d: [
-            d_pw * (e.a * dx + e.b * dy),
-            d_pw * (e.b * dx + e.c * dy),
+            d_pw * e.a.mul_add(dx, e.b * dy),
+            d_pw * e.b.mul_add(dx, e.c * dy),
             half * dx * dx * d_pw,
             dx * dy * d_pw,
             half * dy * dy * d_pw,

@@ -1,7 +1,8 @@
 //! The tile kernels compiled for each instruction set ([`Simd`]) and chosen at run time: the
-//! baseline target with 8 lanes, AVX2 with 8 or 16 lanes, AVX-512 with 16 lanes. No version
-//! enables floating-point contraction (Rust never fuses a multiply and an add by itself), so
-//! all perform the same IEEE operations per pixel and give the same bits.
+//! baseline target with 8 lanes, AVX2 with 8 or 16 lanes, AVX-512 with 16 lanes. All perform the
+//! same IEEE operations per pixel and give the same bits: Rust never fuses a multiply and an add
+//! by itself, and the fused multiply-adds the lane maths asks for (`mul_add`) are correctly
+//! rounded on every path (the FMA instruction, or the C library's `fmaf` on the baseline target).
 
 use super::backward::TileGrads;
 use super::forward::TileOut;

@@ -5,7 +5,7 @@
 
 use rayon::prelude::*;
 
-use super::super::lanes::{exp_k, mask, power_of, sel};
+use super::super::lanes::{add_blend, exp_k, mask, power_of, sel};
 use super::super::tiles::{self, TileBins, TILE};
 use super::dispatch::{self, Kernel};
 use super::worklist::{pack, tile_entries, Entry, Packed, WorkLists};
@@ -67,7 +67,7 @@ fn blend_lanes<R: Real, const L: usize>(
         let valid = act[k] & !dr[k] & mask(pw <= R::zero()) & mask(alpha >= amin);
         let stop = valid & mask(next < tmin);
         let blend = valid & !stop;
-        let c_new = cr[k] + e.col * alpha * tt;
+        let c_new = add_blend(cr[k], e.col, alpha, tt);
         cr[k] = sel(blend, c_new, cr[k]);
         tr[k] = sel(blend, next, tt);
         lr[k] = (tag & blend) | (lr[k] & !blend);

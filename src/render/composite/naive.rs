@@ -5,7 +5,7 @@
 use super::{ALPHA_MAX, ALPHA_MIN, T_MIN};
 use crate::image2d::Image2d;
 use crate::real::Real;
-use crate::render::lanes::{exp_k, power_of};
+use crate::render::lanes::{add_blend, exp_k, power_of};
 use crate::render::tiles::{self, TILE};
 use crate::render::Splats;
 
@@ -64,7 +64,7 @@ pub fn naive_forward<R: Real>(
                 if next < tmin {
                     break;
                 }
-                c += splats.color[i] * alpha * t;
+                c = add_blend(c, splats.color[i], alpha, t);
                 t = next;
             }
             img.data[row * width + col] = c + t * background;

@@ -162,10 +162,10 @@ pub(super) fn tile_entries<R: Real>(
     bins: &TileBins,
     t: usize,
 ) -> Vec<Entry<R>> {
-    let rect = bins.pixel_rect(t).map(|x| x as u32);
+    let [rx0, rx1, ry0, ry1] = bins.pixel_rect(t).map(|x| x as u32);
     // The gather first, in a loop of independent loads with the records `PREFETCH` entries
     // ahead requested early, so that the cache misses of the random per-splat reads overlap;
-    // then the chord tests.
+    // then the chord tests. Entries whose box misses the tile are dropped.
     const PREFETCH: usize = 16;
     let list = bins.list(t);
     let mut chords = Vec::with_capacity(list.len());
@@ -174,13 +174,24 @@ pub(super) fn tile_entries<R: Real>(
         if let Some(&ahead) = list.get(j + PREFETCH) {
             prefetch(&packed[ahead as usize]);
         }
-        if let Some((e, chord)) = tile_entry(packed, rect, id) {
-            entries.push(e);
-            chords.push(chord);
+        let Some(Packed { e, chord }) = &packed[id as usize] else {
+            continue;
+        };
+        let (x0, x1) = (e.x0.max(rx0), e.x1.min(rx1));
+        let (y0, y1) = (e.y0.max(ry0), e.y1.min(ry1));
+        if x0 < x1 && y0 < y1 {
+            entries.push(Entry {
+                x0,
+                x1,
+                y0,
+                y1,
+                ..*e
+            });
+            chords.push(*chord);
         }
     }
     for (e, chord) in entries.iter_mut().zip(&chords) {
-        e.halves = halves_word(chord, e.y0, e.y1, rect[0], rect[2]);
+        e.halves = halves_word(chord, e.y0, e.y1, rx0, ry0);
     }
     entries
 }
@@ -193,37 +204,18 @@ fn prefetch<T>(x: &T) {
         use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
         let p = (x as *const T).cast::<i8>();
         let n = std::mem::size_of::<T>();
-        for off in (0..n).step_by(64).chain(std::iter::once(n - 1)) {
+        // The first byte of every 64-byte line `x` touches (a loop the compiler unrolls).
+        let mut off = 0;
+        while off < n {
             // SAFETY: a prefetch never faults and `p + off` is inside `x`.
             unsafe { _mm_prefetch::<_MM_HINT_T0>(p.add(off)) };
+            off += 64;
         }
+        // SAFETY: as above.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>(p.add(n - 1)) };
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = x;
-}
-
-/// The work-list entry of splat `id` in the tile with pixel rectangle `rect` (`halves` unset)
-/// and its chord data, or `None` when its box misses the tile.
-#[inline(always)]
-fn tile_entry<R: Real>(
-    packed: &[Option<Packed<R>>],
-    [rx0, rx1, ry0, ry1]: [u32; 4],
-    id: u32,
-) -> Option<(Entry<R>, [f64; 6])> {
-    let Packed { e, chord } = packed[id as usize].as_ref()?;
-    let (x0, x1) = (e.x0.max(rx0), e.x1.min(rx1));
-    let (y0, y1) = (e.y0.max(ry0), e.y1.min(ry1));
-    if !(x0 < x1 && y0 < y1) {
-        return None;
-    }
-    let e = Entry {
-        x0,
-        x1,
-        y0,
-        y1,
-        ..*e
-    };
-    Some((e, *chord))
 }
 
 /// Number of (pixel, splat) evaluations the kernels may perform: the sum over tiles of the
