@@ -8,13 +8,41 @@ use crate::real::Real;
 use crate::render::lanes::{add_blend, exp_k, power_of};
 use crate::render::tiles::{self, TILE};
 use crate::render::Splats;
+use crate::simd::Simd;
 
 /// Naive reference of [`super::forward`](fn@super::forward) (no tile lists, no pixel boxes, no
 /// early tile exit): for every pixel, every drawn splat whose tile rectangle holds the pixel's
 /// tile, in (depth, index) order. Same arithmetic per pixel, so it agrees with
 /// [`super::forward`](fn@super::forward) bit for bit; used by the tests and as the per-blend
-/// baseline of `unispine bench render`. Single-threaded, O(pixels x splats).
+/// baseline of `unispine bench render`. Single-threaded, O(pixels x splats). Compiled, like the
+/// tile kernels, for the widest instruction set of the CPU ([`Simd::active`]; its fused
+/// multiply-adds are then instructions rather than library calls), with the same bits on every
+/// path.
 pub fn naive_forward<R: Real>(
+    splats: &Splats<R>,
+    width: usize,
+    height: usize,
+    background: R,
+) -> Image2d<R> {
+    #[cfg(target_arch = "x86_64")]
+    match Simd::active() {
+        // SAFETY: `Simd::active` is supported by the CPU.
+        Simd::Avx512 => return unsafe { naive_avx512(splats, width, height, background) },
+        Simd::Avx2 => return unsafe { naive_avx2(splats, width, height, background) },
+        Simd::Scalar => {}
+    }
+    naive_body(splats, width, height, background)
+}
+
+crate::simd::wide_kernels! {
+    unsafe fn [R: Real](splats: &Splats<R>, width: usize, height: usize, background: R)
+        -> Image2d<R>;
+    naive_avx2 => { naive_body(splats, width, height, background) }
+    naive_avx512 => { naive_body(splats, width, height, background) }
+}
+
+#[inline(always)]
+fn naive_body<R: Real>(
     splats: &Splats<R>,
     width: usize,
     height: usize,
