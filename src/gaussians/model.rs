@@ -62,6 +62,19 @@ impl<R: Real> Gaussians<R> {
 
     /// Error if any parameter is NaN or infinite, naming the group and the Gaussian.
     pub fn check_finite(&self) -> crate::error::Result<()> {
+        // The common case first: one branch-free pass over every value (it vectorises); the
+        // loops below, which name the first bad value, run only when it fails.
+        fn all_finite<R: Real>(v: &[R]) -> bool {
+            v.iter().fold(true, |ok, x| ok & x.is_finite())
+        }
+        if all_finite(self.means.as_flattened())
+            && all_finite(self.log_scales.as_flattened())
+            && all_finite(self.quats.as_flattened())
+            && all_finite(&self.opacity_logits)
+            && all_finite(self.features.as_flattened())
+        {
+            return Ok(());
+        }
         fn chk<R: Real, const N: usize>(name: &str, v: &[[R; N]]) -> crate::error::Result<()> {
             for (i, a) in v.iter().enumerate() {
                 if let Some(x) = a.iter().find(|x| !x.is_finite()) {

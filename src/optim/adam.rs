@@ -115,6 +115,97 @@ fn flat_kernel<R: Real>(c: &Consts<R>, pc: &mut [R], mc: &mut [R], vc: &mut [R],
     }
 }
 
+/// Per-element constants of a row whose elements belong to different groups (lane `a` of each
+/// array: the constants of element `a`'s group).
+#[derive(Clone, Copy)]
+struct RowConsts<R: Real, const N: usize> {
+    b1: [R; N],
+    b2: [R; N],
+    omb1: [R; N],
+    omb2: [R; N],
+    step_size: [R; N],
+    bc2_sqrt: [R; N],
+    eps: [R; N],
+}
+
+impl<R: Real, const N: usize> RowConsts<R, N> {
+    /// Element `a` takes the constants `of(a)`.
+    fn new(of: impl Fn(usize) -> Consts<R>) -> Self {
+        let c: [Consts<R>; N] = std::array::from_fn(of);
+        RowConsts {
+            b1: c.map(|c| c.b1),
+            b2: c.map(|c| c.b2),
+            omb1: c.map(|c| c.omb1),
+            omb2: c.map(|c| c.omb2),
+            step_size: c.map(|c| c.step_size),
+            bc2_sqrt: c.map(|c| c.bc2_sqrt),
+            eps: c.map(|c| c.eps),
+        }
+    }
+}
+
+/// Adam update of every element of every row of a chunk, each element with the constants of
+/// its group ([`RowConsts`]): the operations of [`upd`], in one pass over the rows (the loop
+/// over a row's elements vectorises).
+#[inline(always)]
+fn mixed_rows_kernel<R: Real, const N: usize>(
+    c: &RowConsts<R, N>,
+    pc: &mut [[R; N]],
+    mc: &mut [[R; N]],
+    vc: &mut [[R; N]],
+    gc: &[[R; N]],
+) {
+    for (((p, m), v), g) in pc.iter_mut().zip(mc.iter_mut()).zip(vc.iter_mut()).zip(gc) {
+        for a in 0..N {
+            m[a] = c.b1[a] * m[a] + c.omb1[a] * g[a];
+            v[a] = c.b2[a] * v[a] + c.omb2[a] * g[a] * g[a];
+            let denom = v[a].sqrt() / c.bc2_sqrt[a] + c.eps[a];
+            p[a] -= c.step_size[a] * (m[a] / denom);
+        }
+    }
+}
+
+crate::simd::wide_kernels! {
+    unsafe fn [R: Real, const N: usize](
+        c: &RowConsts<R, N>,
+        pc: &mut [[R; N]],
+        mc: &mut [[R; N]],
+        vc: &mut [[R; N]],
+        gc: &[[R; N]],
+    );
+    mixed_rows_kernel_avx2 => { mixed_rows_kernel(c, pc, mc, vc, gc) }
+    mixed_rows_kernel_avx512 => { mixed_rows_kernel(c, pc, mc, vc, gc) }
+}
+
+/// Adam update of every element of an array-valued group whose elements 0..`split` belong to
+/// group `lo` and the rest to group `hi`, both on, in one pass with the instruction set `simd`
+/// (supported). The same bits as two [`group_step`]s.
+#[allow(clippy::too_many_arguments)]
+fn split_step<R: Real, const N: usize>(
+    simd: Simd,
+    lo: &Consts<R>,
+    hi: &Consts<R>,
+    split: usize,
+    p: &mut [[R; N]],
+    m: &mut [[R; N]],
+    v: &mut [[R; N]],
+    g: &[[R; N]],
+) {
+    let c = RowConsts::<R, N>::new(|a| if a < split { *lo } else { *hi });
+    p.par_chunks_mut(CHUNK)
+        .zip(m.par_chunks_mut(CHUNK))
+        .zip(v.par_chunks_mut(CHUNK))
+        .zip(g.par_chunks(CHUNK))
+        .for_each(|(((pc, mc), vc), gc)| match simd {
+            // SAFETY: the caller passes a supported instruction set.
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => unsafe { mixed_rows_kernel_avx512(&c, pc, mc, vc, gc) },
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { mixed_rows_kernel_avx2(&c, pc, mc, vc, gc) },
+            _ => mixed_rows_kernel(&c, pc, mc, vc, gc),
+        });
+}
+
 crate::simd::wide_kernels! {
     unsafe fn [R: Real, const N: usize](
         c: &Consts<R>,
@@ -285,9 +376,14 @@ impl<R: Real> Adam<R> {
         flat_step(simd, ko, po, mo, vo, &grad.opacity_logits);
         let kd = &k[Group::FDc as usize];
         let (pf, mf, vf) = (&mut p.features, &mut m.features, &mut v.features);
-        group_step(simd, kd, pf, mf, vf, &grad.features, 0..1);
         let kf = &k[Group::FRest as usize];
-        group_step(simd, kf, pf, mf, vf, &grad.features, 1..N_FEATURES);
+        if kd.on && kf.on {
+            // One pass over the feature rows instead of one per group.
+            split_step(simd, kd, kf, 1, pf, mf, vf, &grad.features);
+        } else {
+            group_step(simd, kd, pf, mf, vf, &grad.features, 0..1);
+            group_step(simd, kf, pf, mf, vf, &grad.features, 1..N_FEATURES);
+        }
         for (steps, &on) in self.steps.iter_mut().zip(active) {
             if on {
                 *steps += 1;
