@@ -142,11 +142,26 @@ impl<R: Real, const N: usize> RowConsts<R, N> {
             eps: c.map(|c| c.eps),
         }
     }
+
+    /// The constants of element `a`.
+    #[inline(always)]
+    fn lane(&self, a: usize) -> Consts<R> {
+        Consts {
+            on: true,
+            b1: self.b1[a],
+            b2: self.b2[a],
+            omb1: self.omb1[a],
+            omb2: self.omb2[a],
+            step_size: self.step_size[a],
+            bc2_sqrt: self.bc2_sqrt[a],
+            eps: self.eps[a],
+        }
+    }
 }
 
 /// Adam update of every element of every row of a chunk, each element with the constants of
-/// its group ([`RowConsts`]): the operations of [`upd`], in one pass over the rows (the loop
-/// over a row's elements vectorises).
+/// its group ([`RowConsts`]), in one pass over the rows (the loop over a row's elements
+/// vectorises).
 #[inline(always)]
 fn mixed_rows_kernel<R: Real, const N: usize>(
     c: &RowConsts<R, N>,
@@ -157,10 +172,7 @@ fn mixed_rows_kernel<R: Real, const N: usize>(
 ) {
     for (((p, m), v), g) in pc.iter_mut().zip(mc.iter_mut()).zip(vc.iter_mut()).zip(gc) {
         for a in 0..N {
-            m[a] = c.b1[a] * m[a] + c.omb1[a] * g[a];
-            v[a] = c.b2[a] * v[a] + c.omb2[a] * g[a] * g[a];
-            let denom = v[a].sqrt() / c.bc2_sqrt[a] + c.eps[a];
-            p[a] -= c.step_size[a] * (m[a] / denom);
+            upd(&c.lane(a), &mut p[a], &mut m[a], &mut v[a], g[a]);
         }
     }
 }
