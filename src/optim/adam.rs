@@ -204,18 +204,30 @@ fn split_step<R: Real, const N: usize>(
     g: &[[R; N]],
 ) {
     let c = RowConsts::<R, N>::new(|a| if a < split { *lo } else { *hi });
+    par_chunks4(p, m, v, g, |pc, mc, vc, gc| match simd {
+        // SAFETY: the caller passes a supported instruction set.
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx512 => unsafe { mixed_rows_kernel_avx512(&c, pc, mc, vc, gc) },
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx2 => unsafe { mixed_rows_kernel_avx2(&c, pc, mc, vc, gc) },
+        _ => mixed_rows_kernel(&c, pc, mc, vc, gc),
+    });
+}
+
+/// `f` on the matching `CHUNK`-element chunks of the parameters, moments and gradients, in
+/// parallel (each element is independent: the same bits for any thread count).
+fn par_chunks4<T: Send + Sync>(
+    p: &mut [T],
+    m: &mut [T],
+    v: &mut [T],
+    g: &[T],
+    f: impl Fn(&mut [T], &mut [T], &mut [T], &[T]) + Sync + Send,
+) {
     p.par_chunks_mut(CHUNK)
         .zip(m.par_chunks_mut(CHUNK))
         .zip(v.par_chunks_mut(CHUNK))
         .zip(g.par_chunks(CHUNK))
-        .for_each(|(((pc, mc), vc), gc)| match simd {
-            // SAFETY: the caller passes a supported instruction set.
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx512 => unsafe { mixed_rows_kernel_avx512(&c, pc, mc, vc, gc) },
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx2 => unsafe { mixed_rows_kernel_avx2(&c, pc, mc, vc, gc) },
-            _ => mixed_rows_kernel(&c, pc, mc, vc, gc),
-        });
+        .for_each(|(((pc, mc), vc), gc)| f(pc, mc, vc, gc));
 }
 
 crate::simd::wide_kernels! {
@@ -262,21 +274,17 @@ fn group_step<R: Real, const N: usize>(
             g.as_flattened(),
         );
     }
-    p.par_chunks_mut(CHUNK)
-        .zip(m.par_chunks_mut(CHUNK))
-        .zip(v.par_chunks_mut(CHUNK))
-        .zip(g.par_chunks(CHUNK))
-        .for_each(|(((pc, mc), vc), gc)| {
-            let r = range.clone();
-            match simd {
-                // SAFETY: the caller passes a supported instruction set.
-                #[cfg(target_arch = "x86_64")]
-                Simd::Avx512 => unsafe { rows_kernel_avx512(c, pc, mc, vc, gc, r) },
-                #[cfg(target_arch = "x86_64")]
-                Simd::Avx2 => unsafe { rows_kernel_avx2(c, pc, mc, vc, gc, r) },
-                _ => rows_kernel(c, pc, mc, vc, gc, r),
-            }
-        });
+    par_chunks4(p, m, v, g, |pc, mc, vc, gc| {
+        let r = range.clone();
+        match simd {
+            // SAFETY: the caller passes a supported instruction set.
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => unsafe { rows_kernel_avx512(c, pc, mc, vc, gc, r) },
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { rows_kernel_avx2(c, pc, mc, vc, gc, r) },
+            _ => rows_kernel(c, pc, mc, vc, gc, r),
+        }
+    });
 }
 
 /// Adam update of every element of a flat group with the instruction set `simd` (supported).
@@ -284,18 +292,14 @@ fn flat_step<R: Real>(simd: Simd, c: &Consts<R>, p: &mut [R], m: &mut [R], v: &m
     if !c.on {
         return;
     }
-    p.par_chunks_mut(CHUNK)
-        .zip(m.par_chunks_mut(CHUNK))
-        .zip(v.par_chunks_mut(CHUNK))
-        .zip(g.par_chunks(CHUNK))
-        .for_each(|(((pc, mc), vc), gc)| match simd {
-            // SAFETY: the caller passes a supported instruction set.
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx512 => unsafe { flat_kernel_avx512(c, pc, mc, vc, gc) },
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx2 => unsafe { flat_kernel_avx2(c, pc, mc, vc, gc) },
-            _ => flat_kernel(c, pc, mc, vc, gc),
-        });
+    par_chunks4(p, m, v, g, |pc, mc, vc, gc| match simd {
+        // SAFETY: the caller passes a supported instruction set.
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx512 => unsafe { flat_kernel_avx512(c, pc, mc, vc, gc) },
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx2 => unsafe { flat_kernel_avx2(c, pc, mc, vc, gc) },
+        _ => flat_kernel(c, pc, mc, vc, gc),
+    });
 }
 
 impl<R: Real> Adam<R> {
