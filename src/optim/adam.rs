@@ -116,7 +116,8 @@ fn flat_kernel<R: Real>(c: &Consts<R>, pc: &mut [R], mc: &mut [R], vc: &mut [R],
 }
 
 /// Per-element constants of a row whose elements belong to different groups (lane `a` of each
-/// array: the constants of element `a`'s group).
+/// array: the constants of element `a`'s group). One array per constant, so that the loop over
+/// a row's elements vectorises (over an array of [`Consts`] the compiler left part of it scalar).
 #[derive(Clone, Copy)]
 struct RowConsts<R: Real, const N: usize> {
     b1: [R; N],
