@@ -1,6 +1,7 @@
 //! Maths shared by forward and backward passes: quaternions, covariances, 2x2 inverses,
 //! activations, each with its exact vector-Jacobian product (VJP), plus the central
-//! finite-difference helpers every backward pass is checked with ([`fd`]).
+//! finite-difference helpers every backward pass is checked with ([`fd`]) and inline `floor` /
+//! `ceil` ([`round`]).
 //!
 //! Small fixed-size matrices are plain row-major arrays (`[[R; 3]; 3]`): no allocation, and the
 //! same code runs in f32 and f64 through [`crate::real::Real`].
@@ -12,6 +13,7 @@ pub mod covariance;
 pub mod fd;
 pub mod inverse2;
 pub mod quat;
+pub mod round;
 
 use crate::real::Real;
 

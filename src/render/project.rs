@@ -48,6 +48,7 @@ use crate::geometry::{Camera, Mode};
 use crate::math::activations::{sigmoid, sigmoid_grad_from_output};
 use crate::math::covariance::{covariance, covariance_vjp, CovParts};
 use crate::math::inverse2::{sym2_inverse, sym2_inverse_vjp};
+use crate::math::round;
 use crate::math::{mat3_cast, mat3_t_vec, mat3_vec, Mat3};
 use crate::par::CHUNK;
 use crate::real::Real;
@@ -224,7 +225,7 @@ pub fn project_geom<R: Real>(
     let det = af * cf - bf * bf;
     let mid = 0.5 * (af + cf);
     let lmax = mid + (mid * mid - det).max(DISCRIMINANT_FLOOR).sqrt();
-    let rf = (RADIUS_SIGMAS * lmax.sqrt()).ceil();
+    let rf = round::ceil(RADIUS_SIGMAS * lmax.sqrt());
     if !(rf.is_finite() && rf >= 1.0 && rf < u32::MAX as f64) {
         return (Err(Cull::Degenerate), depth);
     }

@@ -8,6 +8,7 @@ use rayon::prelude::*;
 
 use super::super::tiles::{self, TileBins, TILE};
 use super::Splats;
+use crate::math::round;
 use crate::real::Real;
 
 /// Safety margin (in log space) of the per-splat pixel box.
@@ -119,10 +120,10 @@ pub(super) fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Packed
                 (f64::INFINITY, f64::INFINITY)
             };
             // Pixel centres col + 0.5 within [mx - hx - 1, mx + hx + 1].
-            let x0 = (mx - hx - 1.5).ceil().max(0.0);
-            let x1 = ((mx + hx + 0.5).floor() + 1.0).min(w);
-            let y0 = (my - hy - 1.5).ceil().max(0.0);
-            let y1 = ((my + hy + 0.5).floor() + 1.0).min(h);
+            let x0 = round::ceil(mx - hx - 1.5).max(0.0);
+            let x1 = (round::floor(mx + hx + 0.5) + 1.0).min(w);
+            let y0 = round::ceil(my - hy - 1.5).max(0.0);
+            let y1 = (round::floor(my + hy + 0.5) + 1.0).min(h);
             if !(x0 < x1 && y0 < y1) {
                 return None;
             }
