@@ -36,8 +36,10 @@
 //! `j < n_contrib`).
 //!
 //! Parallelism: rayon over tiles. Each tile is computed by one task in a fixed order; the
-//! per-tile gradient records (one per list entry) are reduced sequentially in tile order, so
-//! image and gradients are bit-identical for any thread count. No atomics.
+//! per-tile gradient records (one per list entry) are reduced sequentially in tile order (by
+//! whichever worker finds the reducer free once the next tiles in that order are finished,
+//! during the tile loop, and the rest after it), so image and gradients are bit-identical for
+//! any thread count. No atomics.
 //!
 //! The stage in four files, by job:
 //! - `worklist`: per-splat pixel boxes, per-row chord tests and the per-tile work lists that
@@ -102,7 +104,8 @@ pub enum Phase {
     Assemble,
     /// The backward tile kernels (parallel over tiles).
     BackwardTiles,
-    /// Per-tile gradient records to per-splat gradients.
+    /// Per-tile gradient records to per-splat gradients: the part left after the backward tile
+    /// kernels (most of the reduction runs during them, on the tiles already finished).
     Reduce,
 }
 

@@ -4,6 +4,8 @@
 //! ([`rows_step`]); one gradient record per entry, reduced sequentially in tile order so that
 //! the gradients are bit-identical for any thread count.
 
+use std::sync::Mutex;
+
 use rayon::prelude::*;
 
 use super::super::lanes::{add_blend, exp_k, mask, power_of, sel};
@@ -352,6 +354,46 @@ fn rows_step<R: Real, const W: usize>(
     any
 }
 
+/// The sequential reduction of the tiles' gradient records into per-splat gradients, in tile
+/// order and, within a tile, back-to-front entry order: the same additions in the same order
+/// whichever thread runs them and however the tiles finish, so the gradients are bit-identical
+/// for any thread count.
+struct Reducer<R: Real> {
+    out: SplatGrads<R>,
+    work: KernelWork,
+    /// The first tile not reduced yet.
+    next: usize,
+}
+
+impl<R: Real> Reducer<R> {
+    /// Reduce the finished tiles from `next` on, up to the first unfinished one.
+    fn drain(&mut self, slots: &[Mutex<Option<TileGrads<R>>>]) {
+        while let Some(slot) = slots.get(self.next) {
+            let Some((tile, w)) = lock(slot).take() else {
+                return;
+            };
+            self.work += w;
+            let out = &mut self.out;
+            for (id, a) in &tile {
+                let i = *id as usize;
+                out.mean2d[i][0] += a[0];
+                out.mean2d[i][1] += a[1];
+                out.conic[i][0] += a[2];
+                out.conic[i][1] += a[3];
+                out.conic[i][2] += a[4];
+                out.opacity[i] += a[5];
+                out.color[i] += a[6];
+            }
+            self.next += 1;
+        }
+    }
+}
+
+/// Lock `m`; a poisoned lock (a panic elsewhere, which rayon re-raises) still holds valid data.
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// Vector-Jacobian product of [`forward`](fn@super::forward): the gradient of sum(d_image * image)
 /// with respect to the splat fields (mean2d in pixels, conic (A, B, C) with B the single
 /// off-diagonal parameter, opacity after the sigmoid, colour). Splats that are not drawn get 0.
@@ -415,32 +457,34 @@ fn backward_kernel_probed<R: Real>(
     } else {
         pack(splats, &saved.bins)
     };
-    let recs: Vec<TileGrads<R>> = (0..saved.bins.n_tiles())
-        .into_par_iter()
-        .map(|t| dispatch::backward_tile(kernel, &packed, saved, d_image, t))
-        .collect();
-    probe(Phase::BackwardTiles);
-    let mut work = KernelWork::default();
-    let mut out = SplatGrads {
-        mean2d: vec![[R::zero(); 2]; n],
-        conic: vec![[R::zero(); 3]; n],
-        opacity: vec![R::zero(); n],
-        color: vec![R::zero(); n],
-    };
-    // Sequential reduction in tile order (and, within a tile, back-to-front entry order).
-    for (tile, w) in &recs {
-        work += *w;
-        for (id, a) in tile {
-            let i = *id as usize;
-            out.mean2d[i][0] += a[0];
-            out.mean2d[i][1] += a[1];
-            out.conic[i][0] += a[2];
-            out.conic[i][1] += a[3];
-            out.conic[i][2] += a[4];
-            out.opacity[i] += a[5];
-            out.color[i] += a[6];
+    let n_tiles = saved.bins.n_tiles();
+    let reducer = Mutex::new(Reducer {
+        out: SplatGrads {
+            mean2d: vec![[R::zero(); 2]; n],
+            conic: vec![[R::zero(); 3]; n],
+            opacity: vec![R::zero(); n],
+            color: vec![R::zero(); n],
+        },
+        work: KernelWork::default(),
+        next: 0,
+    });
+    let slots: Vec<Mutex<Option<TileGrads<R>>>> = (0..n_tiles).map(|_| Mutex::new(None)).collect();
+    (0..n_tiles).into_par_iter().for_each(|t| {
+        let g = dispatch::backward_tile(kernel, &packed, saved, d_image, t);
+        *lock(&slots[t]) = Some(g);
+        // Whoever finds the reducer free adds the finished tiles that come next in tile order
+        // (the others go on with their tiles), so most of the sequential reduction overlaps the
+        // tile kernels instead of following them.
+        if let Ok(mut r) = reducer.try_lock() {
+            r.drain(&slots);
         }
-    }
+    });
+    probe(Phase::BackwardTiles);
+    // The tiles no worker reduced yet (every tile is finished now).
+    let mut r = reducer.into_inner().unwrap_or_else(|e| e.into_inner());
+    r.drain(&slots);
+    debug_assert_eq!(r.next, n_tiles);
+    let (out, work) = (r.out, r.work);
     probe(Phase::Reduce);
     (out, work)
 }
