@@ -161,6 +161,19 @@ pub fn project_geom<R: Real>(
     log_scale: [R; 3],
     quat: [R; 4],
 ) -> (std::result::Result<Geom<R>, Cull>, R) {
+    geom::<R, true>(cam, mean, log_scale, quat)
+}
+
+/// [`project_geom`] with `SCREEN` false stops at Sigma2D, all the backward needs of a Gaussian
+/// the forward drew: no conic, radius or off-image test (`conic` and `radius` are left 0, and
+/// only the zero-quaternion and near-plane culls apply).
+#[inline(always)]
+fn geom<R: Real, const SCREEN: bool>(
+    cam: &CamConsts<R>,
+    mean: [R; 3],
+    log_scale: [R; 3],
+    quat: [R; 4],
+) -> (std::result::Result<Geom<R>, Cull>, R) {
     let d = [
         mean[0] - cam.centre[0],
         mean[1] - cam.centre[1],
@@ -214,6 +227,20 @@ pub fn project_geom<R: Real>(
     let a = tm[0][0] * s0[0] + tm[0][1] * s0[1] + tm[0][2] * s0[2] + dil;
     let b = tm[0][0] * s1[0] + tm[0][1] * s1[1] + tm[0][2] * s1[2];
     let c = tm[1][0] * s1[0] + tm[1][1] * s1[1] + tm[1][2] * s1[2] + dil;
+    if !SCREEN {
+        let geo = Geom {
+            cov,
+            sigma,
+            t,
+            tm,
+            clamped,
+            cov2d: [a, b, c],
+            conic: [zero; 3],
+            mean2d,
+            radius: 0,
+        };
+        return (Ok(geo), depth);
+    }
     let Some(conic) = sym2_inverse(a, b, c) else {
         return (Err(Cull::Degenerate), depth);
     };
@@ -526,7 +553,8 @@ pub fn backward<R: Real>(
                 if !saved.visible.get(i).copied().unwrap_or(false) {
                     continue;
                 }
-                let (Ok(geo), _) = project_geom(&cc, g.means[i], g.log_scales[i], g.quats[i])
+                // Visible: the forward's screen-space tests passed on the same inputs.
+                let (Ok(geo), _) = geom::<R, false>(&cc, g.means[i], g.log_scales[i], g.quats[i])
                 else {
                     continue;
                 };
