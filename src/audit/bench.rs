@@ -107,13 +107,12 @@ pub struct RenderTiming {
 }
 
 /// Names of the rasterizer's phases in [`RenderPhases::cpu`] and [`RenderPhases::wall`], in
-/// the order they run: projection, tile binning and depth sort, per-splat packing, forward tile
-/// kernels, image assembly, backward tile kernels, gradient reduction over tiles, projection
-/// backward to the Gaussian parameters.
-pub const RENDER_PHASES: [&str; 8] = [
+/// the order they run: projection, tile binning and depth sort side by side with the per-splat
+/// packing, forward tile kernels, image assembly, backward tile kernels, what is left of the
+/// gradient reduction after them, projection backward to the Gaussian parameters.
+pub const RENDER_PHASES: [&str; 7] = [
     "project",
-    "bin + sort",
-    "pack",
+    "bin + pack",
     "forward tiles",
     "assemble",
     "backward tiles",
@@ -126,9 +125,9 @@ pub const RENDER_PHASES: [&str; 8] = [
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RenderPhases {
     /// Process CPU time (all threads), s.
-    pub cpu: [f64; 8],
+    pub cpu: [f64; 7],
     /// Wall time, s.
-    pub wall: [f64; 8],
+    pub wall: [f64; 7],
     /// Work of the forward and of the backward tile kernels in one pass.
     pub forward_work: KernelWork,
     pub backward_work: KernelWork,

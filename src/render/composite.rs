@@ -93,10 +93,9 @@ pub const FLOPS_PER_BLEND_BACKWARD: u64 = 56;
 /// per-phase times of `unispine bench render`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Phase {
-    /// Tile binning and the (tile, depth, index) sort ([`super::tiles::bin`]).
-    Bin,
-    /// Per-splat packed records with their pixel boxes.
-    Pack,
+    /// Tile binning and the (tile, depth, index) sort ([`super::tiles::bin`]), and, side by
+    /// side with them, the per-splat packed records with their pixel boxes.
+    BinPack,
     /// The forward tile kernels (parallel over tiles), including the gather of each tile's
     /// work list.
     ForwardTiles,

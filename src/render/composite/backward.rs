@@ -455,7 +455,7 @@ fn backward_kernel_probed<R: Real>(
     let packed = if saved.work.tiles.len() == saved.bins.n_tiles() {
         Vec::new()
     } else {
-        pack(splats, &saved.bins)
+        pack(splats, saved.bins.width, saved.bins.height)
     };
     let n_tiles = saved.bins.n_tiles();
     let reducer = Mutex::new(Reducer {

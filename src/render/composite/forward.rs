@@ -237,7 +237,7 @@ pub fn forward_with<R: Real>(
     forward_kernel(Kernel::of(simd), splats, width, height, background)
 }
 
-/// [`forward`] calling `probe` as each of its phases ends ([`Phase::Bin`] to
+/// [`forward`] calling `probe` as each of its phases ends ([`Phase::BinPack`] to
 /// [`Phase::Assemble`]), e.g. to time them. Same result as [`forward`].
 pub fn forward_probed<R: Real>(
     splats: &Splats<R>,
@@ -268,10 +268,13 @@ fn forward_kernel_probed<R: Real>(
     background: R,
     probe: &mut dyn FnMut(Phase),
 ) -> (Image2d<R>, CompositeSaved<R>) {
-    let bins = tiles::bin(splats, width, height);
-    probe(Phase::Bin);
-    let packed = pack(splats, &bins);
-    probe(Phase::Pack);
+    // Independent of each other: the binning's serial steps (the depth sort) leave the other
+    // workers to the packing.
+    let (bins, packed) = rayon::join(
+        || tiles::bin(splats, width, height),
+        || pack(splats, width, height),
+    );
+    probe(Phase::BinPack);
     let mut outs: Vec<TileOut<R>> = (0..bins.n_tiles())
         .into_par_iter()
         .map(|t| dispatch::forward_tile(kernel, &packed, &bins, t))

@@ -358,7 +358,7 @@ fn probed_passes_report_their_phases_in_order_and_change_no_bit() {
     use Phase::*;
     assert_eq!(
         seen,
-        [Bin, Pack, ForwardTiles, Assemble, BackwardTiles, Reduce]
+        [BinPack, ForwardTiles, Assemble, BackwardTiles, Reduce]
     );
     let (img2, saved2) = forward(&s, w, h, 0.2f32);
     let g2 = backward(&s, &saved2, &d);

@@ -93,8 +93,8 @@ pub(super) fn halves_word(chord: &[f64; 6], y0: u32, y1: u32, rx0: u32, ry0: u32
 /// reach alpha >= 1/255 anywhere (not drawn, o < 1/255, or an empty box). Computed once per
 /// pass (parallel over splats, one packed record per splat so that the per-tile gathers touch
 /// one cache line per entry).
-pub(super) fn pack<R: Real>(s: &Splats<R>, bins: &TileBins) -> Vec<Option<Packed<R>>> {
-    let (w, h) = (bins.width as f64, bins.height as f64);
+pub(super) fn pack<R: Real>(s: &Splats<R>, width: usize, height: usize) -> Vec<Option<Packed<R>>> {
+    let (w, h) = (width as f64, height as f64);
     (0..s.radius.len())
         .into_par_iter()
         .map(|i| {
@@ -222,7 +222,7 @@ fn prefetch<T>(x: &T) {
 /// Number of (pixel, splat) evaluations the kernels may perform: the sum over tiles of the
 /// pixel boxes of their work lists (an upper bound; done pixels and rows are skipped).
 pub fn box_pixels<R: Real>(splats: &Splats<R>, bins: &TileBins) -> u64 {
-    let packed = pack(splats, bins);
+    let packed = pack(splats, bins.width, bins.height);
     (0..bins.n_tiles())
         .map(|t| {
             tile_entries(&packed, bins, t)
