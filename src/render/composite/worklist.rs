@@ -91,8 +91,9 @@ pub(super) fn halves_word(chord: &[f64; 6], y0: u32, y1: u32, rx0: u32, ry0: u32
 
 /// Per-splat entry with its pixel box clipped to the image, or `None` when the splat cannot
 /// reach alpha >= 1/255 anywhere (not drawn, o < 1/255, or an empty box). Computed once per
-/// pass (parallel over splats, one packed record per splat so that the per-tile gathers touch
-/// one cache line per entry).
+/// pass (parallel over splats, one packed record per splat, so that the per-tile gathers read
+/// one record per entry: 112 bytes in f32, about two cache lines; a 64-byte record that
+/// recomputed the chord data from the entry measured no faster).
 pub(super) fn pack<R: Real>(s: &Splats<R>, width: usize, height: usize) -> Vec<Option<Packed<R>>> {
     let (w, h) = (width as f64, height as f64);
     (0..s.radius.len())
