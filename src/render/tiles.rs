@@ -134,11 +134,10 @@ pub fn bin<R: Real>(s: &Splats<R>, width: usize, height: usize) -> TileBins {
         Some((sort_key(s.depth[i].f64(), i as u32), r.map(|x| x as u32)))
     }));
     sort_by_depth(&mut order);
-    // Contiguous runs of the key order, each sorted by tile (a stable counting sort).
-    let per_run = order
-        .len()
-        .div_ceil(2 * rayon::current_num_threads())
-        .max(1);
+    // Contiguous runs of the key order, each sorted by tile (a stable counting sort). A few per
+    // worker, at most 8: each run holds offsets for every tile.
+    let n_runs = (2 * rayon::current_num_threads()).min(8);
+    let per_run = order.len().div_ceil(n_runs).max(1);
     let runs: Vec<Run> = order
         .par_chunks(per_run)
         .map(|keys| Run::new(keys, tiles_x, n_tiles))
