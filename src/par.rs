@@ -33,6 +33,13 @@ pub fn det_sum_by<F: Fn(usize) -> f64 + Sync>(n: usize, f: F) -> f64 {
         .sum()
 }
 
+/// Lock `m`. A lock poisoned by a panic on another thread (which rayon or the thread scope
+/// re-raises on the caller) still holds valid data, so its guard is taken rather than a second
+/// panic raised.
+pub fn lock<T>(m: &std::sync::Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// Check a count of parallel workers (`--jobs`, `--threads`): the allowed range is
 /// [1, 8 x the available cores]. More only costs memory (stacks, processes) and time: results
 /// never depend on it.

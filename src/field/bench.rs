@@ -78,7 +78,7 @@ pub fn time_mlp(cfg: &FieldConfig, simd: Simd, reps: usize) -> Result<MlpTiming>
                 .zip(gx.par_chunks_mut(block * ed))
                 .for_each(|(((xb, gb), g), gxb)| {
                     let slot = rayon::current_thread_index().unwrap_or(0) % ws.len();
-                    let mut c = ws[slot].lock().unwrap_or_else(|e| e.into_inner());
+                    let mut c = crate::par::lock(&ws[slot]);
                     let n = gb.len();
                     mlp.forward_ws(simd, mp, xb, n, &mut c);
                     g.iter_mut().for_each(|v| *v = 0.0);

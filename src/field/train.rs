@@ -172,7 +172,7 @@ impl<R: Real> Workspace<R> {
             .enumerate()
             .for_each(|(bi, ((((chunk, loss), g_mlp), pts), g_x))| {
                 let slot = rayon::current_thread_index().unwrap_or(0) % scratch.len();
-                let mut guard = scratch[slot].lock().unwrap_or_else(|e| e.into_inner());
+                let mut guard = crate::par::lock(&scratch[slot]);
                 let s = &mut *guard;
                 let n = pts.len();
                 let mut clock = Clock::new(times.is_some());
@@ -209,7 +209,7 @@ impl<R: Real> Workspace<R> {
                     .backward_ws(simd, mp, &mut s.mlp, &s.g_mu, n, g_mlp, gx);
                 let t_bwd = clock.lap();
                 if let Some(tm) = times {
-                    let mut tm = tm.lock().unwrap_or_else(|e| e.into_inner());
+                    let mut tm = crate::par::lock(tm);
                     tm.sample += t_sample;
                     tm.encode += t_encode;
                     tm.mlp_forward += t_fwd;
@@ -238,8 +238,7 @@ impl<R: Real> Workspace<R> {
                 &mut self.grad[..ne],
             );
             if let Some(tm) = times {
-                tm.lock().unwrap_or_else(|e| e.into_inner()).encode_backward +=
-                    t0.elapsed().as_secs_f64();
+                crate::par::lock(tm).encode_backward += t0.elapsed().as_secs_f64();
             }
         }
         loss / rays.len() as f64

@@ -488,7 +488,7 @@ pub fn run_plan(
             let (todo, ready, next, machine) = (&todo, &ready, &next, &machine);
             s.spawn(move || loop {
                 let i = {
-                    let mut g = next.lock().unwrap_or_else(|p| p.into_inner());
+                    let mut g = crate::par::lock(next);
                     let i = *g;
                     *g += 1;
                     i

@@ -15,6 +15,7 @@ use super::dispatch::{self, Kernel};
 use super::worklist::{pack, tile_entries, Entry, Packed};
 use super::{CompositeSaved, KernelWork, Phase, Splats, ALPHA_MAX, ALPHA_MIN, TP};
 use crate::image2d::Image2d;
+use crate::par::lock;
 use crate::real::Real;
 use crate::simd::Simd;
 
@@ -387,11 +388,6 @@ impl<R: Real> Reducer<R> {
             self.next += 1;
         }
     }
-}
-
-/// Lock `m`; a poisoned lock (a panic elsewhere, which rayon re-raises) still holds valid data.
-fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// Vector-Jacobian product of [`forward`](fn@super::forward): the gradient of sum(d_image * image)
