@@ -139,14 +139,16 @@ pub(crate) fn hand_over<S: RayLanes>(
 /// As [`Lanes`].
 pub(crate) unsafe trait SampleLanes: Lanes {
     unsafe fn splat_f(x: f32) -> Self::F;
-    /// `a * b` (low 32 bits).
-    unsafe fn mul_i(a: Self::I, b: Self::I) -> Self::I;
+    /// `a - b` (wrapping).
+    unsafe fn sub_i(a: Self::I, b: Self::I) -> Self::I;
+    /// `a & b`.
+    unsafe fn and_i(a: Self::I, b: Self::I) -> Self::I;
     /// The unsigned 32-bit integer in each lane, rounded to the nearest f32 (ties to even), as
     /// `u32 as f32` rounds it.
     unsafe fn u32_to_f(a: Self::I) -> Self::F;
-    /// 64-bit lanes held as (`lo`, `hi`) 32-bit halves plus (`dlo`, `dhi`), wrapping: the carry
-    /// of the low halves goes to the high ones.
-    unsafe fn add_64(lo: Self::I, hi: Self::I, dlo: Self::I, dhi: Self::I) -> (Self::I, Self::I);
+    /// `lo + dlo` as unsigned 32-bit lanes (wrapping), and -1 in the lanes where that addition
+    /// carried (0 elsewhere).
+    unsafe fn add_carry(lo: Self::I, dlo: Self::I) -> (Self::I, Self::I);
     /// Lane k gets the pair `data[idx[k] + off]`, `data[idx[k] + off + 1]`: the first values in
     /// one vector, the second ones in the other.
     ///
@@ -365,8 +367,12 @@ unsafe impl SampleLanes for Avx2 {
         unsafe { _mm256_set1_ps(x) }
     }
     #[inline(always)]
-    unsafe fn mul_i(a: __m256i, b: __m256i) -> __m256i {
-        unsafe { _mm256_mullo_epi32(a, b) }
+    unsafe fn sub_i(a: __m256i, b: __m256i) -> __m256i {
+        unsafe { _mm256_sub_epi32(a, b) }
+    }
+    #[inline(always)]
+    unsafe fn and_i(a: __m256i, b: __m256i) -> __m256i {
+        unsafe { _mm256_and_si256(a, b) }
     }
     #[inline(always)]
     unsafe fn u32_to_f(a: __m256i) -> __m256 {
@@ -379,14 +385,15 @@ unsafe impl SampleLanes for Avx2 {
         }
     }
     #[inline(always)]
-    unsafe fn add_64(lo: __m256i, hi: __m256i, dlo: __m256i, dhi: __m256i) -> (__m256i, __m256i) {
+    unsafe fn add_carry(lo: __m256i, dlo: __m256i) -> (__m256i, __m256i) {
         unsafe {
-            let lo = _mm256_add_epi32(lo, dlo);
-            // Unsigned `lo < dlo` as a signed comparison with the sign bits flipped; the lanes
-            // of the mask are -1 where the low halves carried.
+            let sum = _mm256_add_epi32(lo, dlo);
+            // The sum carried when it is below `dlo` as unsigned values: a signed comparison
+            // with the sign bits flipped.
             let flip = _mm256_set1_epi32(i32::MIN);
-            let carry = _mm256_cmpgt_epi32(_mm256_xor_si256(dlo, flip), _mm256_xor_si256(lo, flip));
-            (lo, _mm256_sub_epi32(_mm256_add_epi32(hi, dhi), carry))
+            let carry =
+                _mm256_cmpgt_epi32(_mm256_xor_si256(dlo, flip), _mm256_xor_si256(sum, flip));
+            (sum, carry)
         }
     }
     #[inline(always)]
@@ -435,7 +442,7 @@ mod tests {
     use super::*;
     use crate::simd::Simd;
 
-    /// `u32_to_f`, `add_64` and `load_pairs` of `L` against their scalar definitions on values
+    /// `u32_to_f`, `add_carry`, `and_i`, `sub_i` and `load_pairs` of `L` against their scalar definitions on values
     /// where rounding and carries matter.
     #[inline(always)]
     unsafe fn check<L: SampleLanes>() {
@@ -471,40 +478,29 @@ mod tests {
                         a[k]
                     );
                 }
-                // 64-bit sums with every pattern of carries and signs.
-                let x: Vec<i64> = (0..w)
-                    .map(|k| {
-                        ((edge[(start + k + 3) % 16] as i64) << 32 | edge[start + k] as i64)
-                            - (1 << 40)
-                    })
+                // 32-bit unsigned sums with and without carries; and, difference.
+                let b: Vec<i32> = (0..w)
+                    .map(|k| edge[(start + 3 * k + 5) % 16] as i32)
                     .collect();
-                let d: Vec<i64> = (0..w)
-                    .map(|k| (edge[(start + 2 * k) % 16] as i64) - (k as i64) * (1 << 33))
-                    .collect();
-                let halves = |v: &[i64]| -> (Vec<i32>, Vec<i32>) {
-                    (
-                        v.iter().map(|&q| q as u32 as i32).collect(),
-                        v.iter().map(|&q| (q >> 32) as i32).collect(),
-                    )
-                };
-                let ((xl, xh), (dl, dh)) = (halves(&x), halves(&d));
-                let (lo, hi) = L::add_64(
-                    L::load_i(&xl),
-                    L::load_i(&xh),
-                    L::load_i(&dl),
-                    L::load_i(&dh),
-                );
-                let (mut l, mut h) = ([0i32; 16], [0i32; 16]);
-                L::store_i(lo, &mut l);
-                L::store_i(hi, &mut h);
+                let (sum, carry) = L::add_carry(L::load_i(&a), L::load_i(&b));
+                let (mut s, mut c) = ([0i32; 16], [0i32; 16]);
+                L::store_i(sum, &mut s);
+                L::store_i(carry, &mut c);
+                let (mut and, mut diff) = ([0i32; 16], [0i32; 16]);
+                L::store_i(L::and_i(L::load_i(&a), L::load_i(&b)), &mut and);
+                L::store_i(L::sub_i(L::load_i(&a), L::load_i(&b)), &mut diff);
                 for k in 0..w {
-                    let want = x[k].wrapping_add(d[k]);
+                    let (want, carried) = (a[k] as u32).overflowing_add(b[k] as u32);
+                    let (x, y) = (a[k], b[k]);
                     assert_eq!(
-                        (l[k], h[k]),
-                        (want as u32 as i32, (want >> 32) as i32),
-                        "{} + {}",
-                        x[k],
-                        d[k]
+                        (s[k] as u32, c[k]),
+                        (want, -(carried as i32)),
+                        "{x:#x} + {y:#x}"
+                    );
+                    assert_eq!(
+                        (and[k], diff[k]),
+                        (x & y, x.wrapping_sub(y)),
+                        "{x:#x}, {y:#x}"
                     );
                 }
             }

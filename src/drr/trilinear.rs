@@ -24,6 +24,7 @@
 
 use super::{clip_ray, Grid};
 use crate::geometry::{Camera, Mode};
+use crate::math::round::{ceil, floor};
 use crate::real::Real;
 
 /// The ray-march of the ray through pixel (`col`, `row`), and whether that ray met the volume
@@ -61,7 +62,7 @@ pub(crate) fn ray<R: Real>(
         }
         Mode::Parallel => cam.dsd,
     };
-    let h = len / (len / setup.h0).ceil();
+    let h = len / ceil(len / setup.h0);
     (o, d, h, hit)
 }
 
@@ -69,7 +70,7 @@ pub(crate) fn ray<R: Real>(
 /// interpolant can be non-zero; the benchmark's count).
 pub(crate) fn sample_count(setup: &Setup, cam: &Camera, o: [f64; 3], d: [f64; 3], h: f64) -> u64 {
     match clip_ray(cam, o, d, setup.outer.0, setup.outer.1) {
-        Some((ta, tb)) => ((tb / h).floor() as i64 - (ta / h).ceil() as i64 + 1).max(0) as u64,
+        Some((ta, tb)) => (floor(tb / h) as i64 - ceil(ta / h) as i64 + 1).max(0) as u64,
         None => 0,
     }
 }
@@ -166,8 +167,8 @@ pub(crate) fn plan<R: Real>(
     let Some((ta, tb)) = clip_ray(cam, o, d, setup.outer.0, setup.outer.1) else {
         return plan;
     };
-    let i_lo = (ta / h).ceil() as i64;
-    let i_hi = (tb / h).floor() as i64;
+    let i_lo = ceil(ta / h) as i64;
+    let i_hi = floor(tb / h) as i64;
     if i_hi < i_lo {
         return plan;
     }
@@ -182,8 +183,8 @@ pub(crate) fn plan<R: Real>(
     let (j_lo, j_hi) = match setup.inner {
         Some((ilo, ihi)) => match clip_ray(cam, o, d, ilo, ihi) {
             Some((tc, td)) => (
-                ((tc / h).ceil() as i64).max(i_lo),
-                ((td / h).floor() as i64).min(i_hi),
+                (ceil(tc / h) as i64).max(i_lo),
+                (floor(td / h) as i64).min(i_hi),
             ),
             None => (i_hi + 1, i_hi),
         },
@@ -348,25 +349,22 @@ fn fixed_frac<R: Real>(f: i64) -> R {
     <R as num_traits::NumCast>::from(f).unwrap_or_else(R::zero)
 }
 
-/// `x.floor()` for `|x| < 2^52`, without the library call the baseline x86-64 target makes for
-/// it (no rounding instruction before SSE4.1): an integral `x` (-0.0 included) is its own
-/// floor; otherwise the truncation, exact, or one below it when it rounded up.
-#[inline(always)]
-fn floor(x: f64) -> f64 {
-    let t = x as i64 as f64;
-    if t == x {
-        x
-    } else if t > x {
-        t - 1.0
-    } else {
-        t
-    }
-}
-
-/// The zero-padded trilinear interpolant at continuous index `q` (voxel centres at integers).
+/// The zero-padded trilinear interpolant at continuous index `q` (voxel centres at integers):
+/// `sum over the 8 neighbours in the grid, x fastest, of (((1 w_x) w_y) w_z) value`, summed in
+/// that corner order.
+///
+/// Branch-free over the corners: a neighbour outside the grid gets weight 0 and a clamped
+/// index (a voxel in the grid), so its term is `0 x value = +-0` and adding it leaves the sum's
+/// bits unchanged: the sum starts at +0 and a round-to-nearest sum is -0 only when both terms
+/// are -0, so it is never -0, and `s + +-0 = s` for every other `s`. Every value is finite
+/// ([`super::Projector::new`] checks). The other corners' weights are the same products as
+/// when the outside ones are skipped, so the result is that sum bit for bit
+/// (`padded_sample_matches_the_sum_over_the_corners_in_the_grid`).
+#[inline]
 fn sample_padded<R: Real>(grid: &Grid<R>, q: [f64; 3]) -> R {
-    // Per axis: the lower and the upper neighbour's index (`None` outside the grid) and weight.
-    let mut at = [[None; 2]; 3];
+    // Per axis: the lower and upper neighbour's index, clamped into the grid, and weight (0
+    // for a neighbour outside it).
+    let mut at = [[0usize; 2]; 3];
     let mut wt = [[R::zero(); 2]; 3];
     for a in 0..3 {
         let n = grid.n[a];
@@ -375,18 +373,27 @@ fn sample_padded<R: Real>(grid: &Grid<R>, q: [f64; 3]) -> R {
         }
         let fl = floor(q[a]);
         let f = R::c(q[a] - fl);
+        // In [-1, n - 1]: the lower neighbour is outside when it is -1, the upper when the
+        // lower is n - 1.
         let i = fl as i64;
-        at[a] = [i, i + 1].map(|i| (i >= 0 && i < n as i64).then_some(i as usize));
-        wt[a] = [R::one() - f, f];
+        let last = n as i64 - 1;
+        at[a] = [i.max(0) as usize, (i + 1).min(last) as usize];
+        wt[a] = [
+            if i >= 0 { R::one() - f } else { R::zero() },
+            if i < last { f } else { R::zero() },
+        ];
     }
     let [nx, ny, _] = grid.n;
+    let data = grid.data;
     let mut acc = R::zero();
     // Corners in the order x, then y, then z up; the weight is 1 x w_x x w_y x w_z.
-    for corner in 0..8 {
-        let (ux, uy, uz) = (corner & 1, (corner >> 1) & 1, corner >> 2);
-        if let (Some(x), Some(y), Some(z)) = (at[0][ux], at[1][uy], at[2][uz]) {
-            let w = R::one() * wt[0][ux] * wt[1][uy] * wt[2][uz];
-            acc += w * grid.data[x + nx * (y + ny * z)];
+    for uz in 0..2 {
+        for uy in 0..2 {
+            let row = nx * (at[1][uy] + ny * at[2][uz]);
+            for ux in 0..2 {
+                let w = R::one() * wt[0][ux] * wt[1][uy] * wt[2][uz];
+                acc += w * data[at[0][ux] + row];
+            }
         }
     }
     acc
@@ -394,27 +401,75 @@ fn sample_padded<R: Real>(grid: &Grid<R>, q: [f64; 3]) -> R {
 
 #[cfg(test)]
 mod tests {
-    #[test]
-    fn floor_is_the_library_floor() {
-        let xs = [
-            -0.999999,
-            -0.5,
-            -0.0,
-            0.0,
-            1e-300,
-            -1e-300,
-            0.5,
-            1.0,
-            2.999999999,
-            3.0,
-            511.5,
-            -1.0,
-            -1.5,
-            4503599627370495.5,
-            -4503599627370495.5,
-        ];
-        for x in xs {
-            assert_eq!(super::floor(x).to_bits(), x.floor().to_bits(), "{x}");
+    use super::super::Grid;
+    use crate::real::Real;
+    use rand::{RngExt, SeedableRng};
+
+    /// The zero-padded interpolant by its definition: the corners outside the grid skipped.
+    fn padded_by_definition<R: Real>(grid: &Grid<R>, q: [f64; 3]) -> R {
+        let mut at = [[None; 2]; 3];
+        let mut wt = [[R::zero(); 2]; 3];
+        for a in 0..3 {
+            let n = grid.n[a];
+            if !(q[a] > -1.0 && q[a] < n as f64) {
+                return R::zero();
+            }
+            let fl = q[a].floor();
+            let f = R::c(q[a] - fl);
+            let i = fl as i64;
+            at[a] = [i, i + 1].map(|i| (i >= 0 && i < n as i64).then_some(i as usize));
+            wt[a] = [R::one() - f, f];
         }
+        let [nx, ny, _] = grid.n;
+        let mut acc = R::zero();
+        for corner in 0..8 {
+            let (ux, uy, uz) = (corner & 1, (corner >> 1) & 1, corner >> 2);
+            if let (Some(x), Some(y), Some(z)) = (at[0][ux], at[1][uy], at[2][uz]) {
+                let w = R::one() * wt[0][ux] * wt[1][uy] * wt[2][uz];
+                acc += w * grid.data[x + nx * (y + ny * z)];
+            }
+        }
+        acc
+    }
+
+    fn check<R: Real>(seed: u64) {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        for _ in 0..200 {
+            let n = [0; 3].map(|_| rng.random_range(1..5usize));
+            // Values of both signs, zeros of both signs and tiny ones (products that underflow).
+            let data: Vec<R> = (0..n[0] * n[1] * n[2])
+                .map(|_| match rng.random_range(0..6) {
+                    0 => R::c(0.0),
+                    1 => R::c(-0.0),
+                    2 => R::c(rng.random_range(-1e-38..1e-38)),
+                    _ => R::c(rng.random_range(-3.0..3.0)),
+                })
+                .collect();
+            let grid = Grid {
+                data: &data,
+                n,
+                s: [1.0; 3],
+                lo: [0.0; 3],
+                hi: n.map(|v| v as f64),
+            };
+            for _ in 0..200 {
+                // Outside, on the faces' half-voxel shells, on lattice points, inside.
+                let q = n.map(|na| match rng.random_range(0..4) {
+                    0 => rng.random_range(-1.5..na as f64 + 0.5),
+                    1 => rng.random_range(-1.0..0.0),
+                    2 => rng.random_range(-1..na as i64) as f64,
+                    _ => rng.random_range(na as f64 - 1.0..na as f64),
+                });
+                let fast = super::sample_padded(&grid, q);
+                let slow = padded_by_definition(&grid, q);
+                assert_eq!(fast.f64().to_bits(), slow.f64().to_bits(), "{n:?} {q:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn padded_sample_matches_the_sum_over_the_corners_in_the_grid() {
+        check::<f32>(1);
+        check::<f64>(2);
     }
 }

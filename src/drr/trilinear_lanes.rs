@@ -2,12 +2,14 @@
 //! one ray per lane (f32 volumes; 8 lanes on both vector paths, see `run_avx512`).
 //!
 //! Each lane runs the per-ray loop step for step: its 32.32 fixed-point position is the scalar
-//! loop's `p + k dp`, held as two 32-bit halves and stepped by `dp` with the carry (exact integer
-//! arithmetic, so the same position); the voxel index, the fraction (`u32 -> f32`, one rounding
-//! to nearest, times 2^-32), the seven lerps and the addition to the lane's sum are the scalar
+//! loop's `p + k dp`, held as the three low (fractional) 32-bit halves and the index of the lower
+//! corner, `hi_x + nx hi_y + nx ny hi_z`: a step adds `dp`'s low halves with their carries, and
+//! moves the index by `dp`'s high halves (times the strides) plus the stride of every axis whose
+//! low half carried (exact integer arithmetic, so the same position and corner as the scalar
+//! loop's, with no multiplication in the loop); the fraction (`u32 -> f32`, one rounding to
+//! nearest, times 2^-32), the seven lerps and the addition to the lane's sum are the scalar
 //! loop's IEEE operations in its order. So a lane's sum is the scalar sum, bit for bit. A lane
-//! whose ray has run its samples hands its sum over and takes the next ray (rays in tile order,
-//! so the lanes march neighbouring rays through the same cache lines).
+//! whose ray has run its samples hands its sum over and takes the next ray.
 //!
 //! The eight corners are four x pairs `(x, x + 1)`, each read with one 64-bit scalar load and
 //! split into two vectors ([`SampleLanes::load_pairs`]): on AMD Zen 4 gathers are slower (eight
@@ -23,28 +25,31 @@ use super::lanes::{hand_over, start_lanes, RayLanes, SampleLanes, MAXW};
 use super::trilinear::March;
 
 /// The per-lane state, as arrays the vectors are loaded from and stored to when a lane changes
-/// ray: the position's low and high halves per axis, the step's, the samples left, the sum and
-/// where it goes.
+/// ray: the position's fractional (low) halves per axis and their steps, the index of the
+/// lower corner and its step, the samples left, the sum and where it goes.
 struct State {
     lo: [[i32; MAXW]; 3],
-    hi: [[i32; MAXW]; 3],
     dlo: [[i32; MAXW]; 3],
-    dhi: [[i32; MAXW]; 3],
+    idx: [i32; MAXW],
+    didx: [i32; MAXW],
     left: [i32; MAXW],
     acc: [f32; MAXW],
     slot: [usize; MAXW],
+    /// Index strides of the axes: 1, nx, nx ny.
+    strides: [i64; 3],
 }
 
 impl State {
-    fn new() -> Self {
+    fn new(strides: [i64; 3]) -> Self {
         State {
             lo: [[0; MAXW]; 3],
-            hi: [[0; MAXW]; 3],
             dlo: [[0; MAXW]; 3],
-            dhi: [[0; MAXW]; 3],
+            idx: [0; MAXW],
+            didx: [0; MAXW],
             left: [0; MAXW],
             acc: [0.0; MAXW],
             slot: [0; MAXW],
+            strides,
         }
     }
 }
@@ -52,14 +57,19 @@ impl State {
 impl RayLanes for State {
     type Ray = March;
 
-    /// (The march's count is in [1, 2^31).)
+    /// (The march's count is in [1, 2^31); its first index is in the grid, below 2^31.)
     fn start(&mut self, k: usize, slot: usize, m: March) {
+        let (mut idx, mut didx) = (0i64, 0i64);
         for a in 0..3 {
             self.lo[a][k] = m.p[a] as u32 as i32;
-            self.hi[a][k] = (m.p[a] >> 32) as i32;
             self.dlo[a][k] = m.dp[a] as u32 as i32;
-            self.dhi[a][k] = (m.dp[a] >> 32) as i32;
+            idx += (m.p[a] >> 32) * self.strides[a];
+            didx = didx.wrapping_add((m.dp[a] >> 32).wrapping_mul(self.strides[a]));
         }
+        self.idx[k] = idx as i32;
+        // Taken modulo 2^32: the lanes' index arithmetic wraps, and every index it reaches is
+        // a true one, below 2^31.
+        self.didx[k] = didx as i32;
         self.left[k] = m.count as i32;
         self.acc[k] = 0.0;
         self.slot[k] = slot;
@@ -97,13 +107,13 @@ pub(crate) unsafe fn run<L: SampleLanes>(
         let (vnx, vnxy) = (L::splat_i(nx as i32), L::splat_i(nxy as i32));
         let inv = L::splat_f((1.0 / super::trilinear::FIX) as f32);
         let (zero, minus1) = (L::splat_i(0), L::splat_i(-1));
-        let mut s = State::new();
+        let mut s = State::new([1, nx as i64, nxy as i64]);
         let mut active = start_lanes(&mut s, w, rays);
         while active != 0 {
             let [mut lx, mut ly, mut lz] = L::load3_i(&s.lo);
-            let [mut hx, mut hy, mut hz] = L::load3_i(&s.hi);
             let [dlx, dly, dlz] = L::load3_i(&s.dlo);
-            let [dhx, dhy, dhz] = L::load3_i(&s.dhi);
+            let mut b = L::load_i(&s.idx);
+            let db = L::load_i(&s.didx);
             let mut left = L::load_i(&s.left);
             let mut acc = L::load_f(&s.acc);
             let mut act = L::mask_from_bits(active);
@@ -111,11 +121,11 @@ pub(crate) unsafe fn run<L: SampleLanes>(
                 let fx = L::mul(L::u32_to_f(lx), inv);
                 let fy = L::mul(L::u32_to_f(ly), inv);
                 let fz = L::mul(L::u32_to_f(lz), inv);
-                let b = L::add_i(L::add_i(hx, L::mul_i(vnx, hy)), L::mul_i(vnxy, hz));
                 // Idle lanes read the first voxel's pairs (in the grid, not summed).
                 let idx = L::sel_i(act, b, zero);
-                // SAFETY: an active lane's position is one of its march's, so its index is at
-                // most len - 1 - (nxy + nx + 1) and every pair of its rows is in `data`; 0 is too.
+                // SAFETY: an active lane's index is its position's lower corner (see the step
+                // below), at most len - 1 - (nxy + nx + 1), so every pair of its rows is in
+                // `data`; 0 is too.
                 let (c000, c100) = L::load_pairs(data, idx, rows[0]);
                 let (c010, c110) = L::load_pairs(data, idx, rows[1]);
                 let (c001, c101) = L::load_pairs(data, idx, rows[2]);
@@ -135,9 +145,15 @@ pub(crate) unsafe fn run<L: SampleLanes>(
                 left = L::add_i(left, minus1);
                 let fin = L::and(act, L::eq_i(left, zero));
                 act = L::andnot(fin, act);
-                (lx, hx) = L::add_64(lx, hx, dlx, dhx);
-                (ly, hy) = L::add_64(ly, hy, dly, dhy);
-                (lz, hz) = L::add_64(lz, hz, dlz, dhz);
+                // The next position: each axis's high half moves by the step's high half plus
+                // the low halves' carry, so the lower corner's index moves by `didx` plus the
+                // carried axes' strides (the carry masks are -1).
+                let (nlx, cx) = L::add_carry(lx, dlx);
+                let (nly, cy) = L::add_carry(ly, dly);
+                let (nlz, cz) = L::add_carry(lz, dlz);
+                (lx, ly, lz) = (nlx, nly, nlz);
+                let carried = L::add_i(L::and_i(cy, vnx), L::and_i(cz, vnxy));
+                b = L::add_i(L::sub_i(L::add_i(b, db), cx), carried);
                 let fb = L::mask_bits(fin);
                 if fb != 0 {
                     break fb;
@@ -146,9 +162,7 @@ pub(crate) unsafe fn run<L: SampleLanes>(
             L::store_i(lx, &mut s.lo[0]);
             L::store_i(ly, &mut s.lo[1]);
             L::store_i(lz, &mut s.lo[2]);
-            L::store_i(hx, &mut s.hi[0]);
-            L::store_i(hy, &mut s.hi[1]);
-            L::store_i(hz, &mut s.hi[2]);
+            L::store_i(b, &mut s.idx);
             L::store_i(left, &mut s.left);
             L::store_f(acc, &mut s.acc);
             active = hand_over(&mut s, active, done, rays, out);
