@@ -85,6 +85,8 @@ pub(crate) trait RayLanes {
     fn start(&mut self, k: usize, slot: usize, ray: Self::Ray);
     /// Lane `k`'s slot and sum.
     fn result(&self, k: usize) -> (usize, f32);
+    /// Lane `k` has no ray left to take (it stays idle until the kernel returns).
+    fn park(&mut self, _k: usize) {}
 }
 
 /// Start the first `w` lanes of `s` on the first rays of `rays`; returns the lanes started (bit
@@ -126,6 +128,8 @@ pub(crate) fn hand_over<S: RayLanes>(
         if let Some((slot, ray)) = rays.next() {
             s.start(k, slot, ray);
             active |= 1 << k;
+        } else {
+            s.park(k);
         }
     }
     active
@@ -253,12 +257,18 @@ unsafe impl Lanes for Avx512 {
     }
 }
 
-/// AVX2: 8 lanes; masks are all-ones / all-zeros lanes.
+/// AVX2: 8 lanes; masks are all-ones / all-zeros lanes. With `VL` (only from code compiled with
+/// AVX-512 F and VL, on a CPU that has them) the unsigned conversion is AVX-512's one
+/// instruction; every other operation is AVX2's.
 #[cfg(target_arch = "x86_64")]
-pub(crate) struct Avx2;
+pub(crate) struct Avx2<const VL: bool = false>;
+
+/// The 8 lanes of [`Avx2`] with AVX-512's unsigned conversion.
+#[cfg(target_arch = "x86_64")]
+pub(crate) type Avx2Vl = Avx2<true>;
 
 #[cfg(target_arch = "x86_64")]
-unsafe impl Lanes for Avx2 {
+unsafe impl<const VL: bool> Lanes for Avx2<VL> {
     const W: usize = 8;
     type F = __m256;
     type I = __m256i;
@@ -361,7 +371,7 @@ unsafe impl Lanes for Avx2 {
 }
 
 #[cfg(target_arch = "x86_64")]
-unsafe impl SampleLanes for Avx2 {
+unsafe impl<const VL: bool> SampleLanes for Avx2<VL> {
     #[inline(always)]
     unsafe fn splat_f(x: f32) -> __m256 {
         unsafe { _mm256_set1_ps(x) }
@@ -378,7 +388,12 @@ unsafe impl SampleLanes for Avx2 {
     unsafe fn u32_to_f(a: __m256i) -> __m256 {
         // AVX2 converts signed lanes only: the high and low 16 bits convert exactly, the high
         // part's scaling by 2^16 is exact, and their sum is the one rounding of the value.
+        // AVX-512 F converts unsigned lanes (round to nearest even, the default mode), here on
+        // the low half of a 16-lane vector whose upper half is not used.
         unsafe {
+            if VL {
+                return _mm512_castps512_ps256(_mm512_cvtepu32_ps(_mm512_castsi256_si512(a)));
+            }
             let hi = _mm256_cvtepi32_ps(_mm256_srli_epi32::<16>(a));
             let lo = _mm256_cvtepi32_ps(_mm256_and_si256(a, _mm256_set1_epi32(0xffff)));
             _mm256_add_ps(_mm256_mul_ps(hi, _mm256_set1_ps(65536.0)), lo)
@@ -521,7 +536,7 @@ mod tests {
         // The AVX2 operations, also as the AVX-512 path compiles them.
         unsafe fn []();
         check_avx2 => { unsafe { check::<Avx2>() } }
-        check_avx512 => { unsafe { check::<Avx2>() } }
+        check_avx512 => { unsafe { check::<Avx2>(); check::<Avx2Vl>() } }
     }
 
     #[test]
