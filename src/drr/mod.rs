@@ -30,6 +30,7 @@
 
 pub mod bench;
 mod lanes;
+mod padded_lanes;
 pub mod siddon;
 mod siddon_lanes;
 pub mod trilinear;
@@ -307,9 +308,11 @@ fn siddon_band(
 
 /// The trilinear ray-march on the vector lanes of `simd` for the band `(out, w, row0)` (rows of
 /// `w` pixels, the first one being `row0`); returns the number of rays that met the box. Tile by
-/// tile of [`LANE_TILE`] rays, one ray per lane: each ray's per-ray part ([`trilinear::plan`],
-/// [`trilinear::finish`]) runs as in the per-ray loop, and the tile's inner loops run on the
-/// lanes, which start together on the tile and end with it.
+/// tile of [`LANE_TILE`] rays, one ray per lane: each ray's set-up ([`trilinear::plan_runs`])
+/// runs per ray, its zero-padded samples before and after its inner loop on the lanes of
+/// [`padded_lanes`] (one run per lane), and its inner loop on those of [`trilinear_lanes`],
+/// which start together on the tile and end with it; the pieces are added in the per-ray
+/// loop's order ([`trilinear::finish_start`]).
 fn trilinear_band(
     simd: Simd,
     grid: &Grid<f32>,
@@ -321,17 +324,26 @@ fn trilinear_band(
     let mut hits = 0;
     let (tile_rows, tile_cols) = LANE_TILE;
     let mut plans = Vec::with_capacity(tile_rows * tile_cols);
+    let mut runs = Vec::with_capacity(tile_rows * tile_cols);
     let mut inner = [0.0f32; LANE_TILE.0 * LANE_TILE.1];
     for r0 in (0..rows).step_by(tile_rows) {
         for c0 in (0..w).step_by(tile_cols) {
             plans.clear();
             for r in r0..(r0 + tile_rows).min(rows) {
                 for col in c0..(c0 + tile_cols).min(w) {
-                    plans.push((
-                        r * w + col,
-                        trilinear::plan(grid, setup, cam, col, row0 + r),
-                    ));
+                    let plan = trilinear::plan_runs(grid, setup, cam, col, row0 + r);
+                    plans.push((r * w + col, plan));
                 }
+            }
+            // The samples before the inner loops, from 0.
+            let mut sums = [0.0f32; LANE_TILE.0 * LANE_TILE.1];
+            padded_runs(simd, grid, &plans, |p| p.before_run, &sums, &mut runs);
+            for (k, (_, p)) in plans.iter_mut().enumerate() {
+                p.before = if lane_run(p.before_run) {
+                    runs[k].acc
+                } else {
+                    trilinear::sum_padded(grid, p.q0, p.dq, p.before_run, 0.0)
+                };
             }
             // Empty marches, and marches of 2^31 samples or more (a step far below the voxel
             // size), stay per ray.
@@ -343,8 +355,8 @@ fn trilinear_band(
                 .map(|(k, (_, p))| (k, p.march));
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `simd` is supported (`or_narrower`); the grid has fewer than 2^31 voxels
-            // (`lanes_f32`); every march comes from `trilinear::plan` on this grid with a count
-            // in [1, 2^31); every slot `k` is in `inner` (one per pixel of the tile).
+            // (`lanes_f32`); every march comes from `trilinear::plan_runs` on this grid with a
+            // count in [1, 2^31); every slot `k` is in `inner` (one per pixel of the tile).
             unsafe {
                 match simd {
                     Simd::Avx512 => {
@@ -359,18 +371,70 @@ fn trilinear_band(
             #[cfg(not(target_arch = "x86_64"))]
             unreachable!("vector paths exist on x86-64 only");
             drop(rays);
-            for (k, (slot, p)) in plans.iter().enumerate() {
-                let sum = if lanes(&p.march) {
+            // The sums up to the samples after the inner loops, then those samples.
+            for (k, (_, p)) in plans.iter().enumerate() {
+                let inner = if lanes(&p.march) {
                     inner[k]
                 } else {
                     trilinear::march_scalar(grid, &p.march)
                 };
-                out[*slot] = trilinear::finish(grid, p, sum);
+                sums[k] = trilinear::finish_start(p, inner);
+            }
+            padded_runs(simd, grid, &plans, |p| p.after, &sums, &mut runs);
+            for (k, (slot, p)) in plans.iter().enumerate() {
+                let sum = if lane_run(p.after) {
+                    runs[k].acc
+                } else {
+                    trilinear::sum_padded(grid, p.q0, p.dq, p.after, sums[k])
+                };
+                out[*slot] = trilinear::scale(p, sum);
                 hits += p.hit as usize;
             }
         }
     }
     hits
+}
+
+/// Whether the lanes of [`padded_lanes`] take a run of samples `first..=last`: empty, or fewer
+/// than 2^31 samples of index below 2^52 in magnitude (any real geometry's); the others are
+/// summed per ray.
+fn lane_run((first, last): (i64, i64)) -> bool {
+    first > last || (first.abs() < 1 << 52 && last.abs() < 1 << 52 && last - first < (1 << 31) - 1)
+}
+
+/// `runs[k].acc` = `init[k]` plus the zero-padded samples `run(plan k)` of the tile's plans,
+/// summed on the lanes of `simd` (an empty run for the runs that [`lane_run`] leaves per ray).
+fn padded_runs(
+    simd: Simd,
+    grid: &Grid<f32>,
+    plans: &[(usize, trilinear::Plan<f32>)],
+    run: impl Fn(&trilinear::Plan<f32>) -> (i64, i64),
+    init: &[f32],
+    runs: &mut Vec<trilinear::Run>,
+) {
+    runs.clear();
+    runs.extend(plans.iter().zip(init).map(|((_, p), &acc)| {
+        let (first, last) = if lane_run(run(p)) { run(p) } else { (1, 0) };
+        trilinear::Run {
+            q0: p.q0,
+            dq: p.dq,
+            first,
+            last,
+            acc,
+        }
+    }));
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: `simd` is supported (`or_narrower`); the grid has fewer than 2^31 voxels
+    // (`lanes_f32`); every run has fewer than 2^31 samples of index below 2^52 (`lane_run`).
+    unsafe {
+        match simd {
+            Simd::Avx512 => padded_lanes::sum_runs_avx512(grid.data, grid.n, runs),
+            Simd::Avx2 => padded_lanes::sum_runs_avx2(grid.data, grid.n, runs),
+            Simd::Scalar => unreachable!("the scalar path runs the per-ray loop"),
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    unreachable!("vector paths exist on x86-64 only");
 }
 
 /// A `dyn Iterator` as a sized one (the ray source is called once per ray, not per step).

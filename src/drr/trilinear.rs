@@ -115,10 +115,11 @@ pub(crate) struct March {
     pub count: usize,
 }
 
-/// One ray's ray-march split around its fast path: [`plan`] sums the zero-padded samples before
-/// it, the inner loop's sum comes from [`march_scalar`] or the vector lanes
-/// ([`super::trilinear_lanes`], the same bits), and [`finish`] adds the rest in the per-ray
-/// order: `h x (((before + inner) + moved) + after_1 + after_2 + ...)`.
+/// One ray's ray-march split around its fast path: the zero-padded samples before it (summed by
+/// [`plan`], or by the vector lanes of [`super::padded_lanes`] after [`plan_runs`]), the inner
+/// loop's sum ([`march_scalar`] or [`super::trilinear_lanes`]), and the rest added in the
+/// per-ray order by [`finish`] (or [`finish_start`], the lanes and [`scale`]):
+/// `h x (((before + inner) + moved) + after_1 + after_2 + ...)`. Every path gives the same bits.
 pub(crate) struct Plan<R: Real> {
     /// The ray met the volume box.
     pub hit: bool,
@@ -127,21 +128,63 @@ pub(crate) struct Plan<R: Real> {
     /// Step (mm).
     h: f64,
     /// Continuous voxel index of sample `i`: `q0 + i dq`.
-    q0: [f64; 3],
-    dq: [f64; 3],
-    /// Sum of the samples before the fast range (or of all samples when there is none).
-    before: R,
+    pub q0: [f64; 3],
+    pub dq: [f64; 3],
+    /// The samples before the fast range (all samples when there is none),
+    /// `before_run.0..=before_run.1` (empty if `.0 > .1`), and their sum.
+    pub before_run: (i64, i64),
+    pub before: R,
     /// Whether the ray has a fast range (then the inner sum and `moved` are added).
     fast: bool,
     /// Sum of the fast range's end samples that rounding put outside the centre box (they
     /// take the zero-padded path).
     moved: R,
     /// The samples after the fast range, `after.0..=after.1` (empty if `after.0 > after.1`).
-    after: (i64, i64),
+    pub after: (i64, i64),
 }
 
-/// The ray through pixel (`col`, `row`) up to its fast path (see [`Plan`]).
+/// A run of one ray's zero-padded samples for the vector lanes ([`super::padded_lanes`]): the
+/// samples `first..=last` at `q0 + i dq`, added in order to `acc`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Run {
+    pub q0: [f64; 3],
+    pub dq: [f64; 3],
+    pub first: i64,
+    pub last: i64,
+    pub acc: f32,
+}
+
+/// [`plan_runs`] with the samples before the fast path summed.
 pub(crate) fn plan<R: Real>(
+    grid: &Grid<R>,
+    setup: &Setup,
+    cam: &Camera,
+    col: usize,
+    row: usize,
+) -> Plan<R> {
+    let mut plan = plan_runs(grid, setup, cam, col, row);
+    plan.before = sum_padded(grid, plan.q0, plan.dq, plan.before_run, R::zero());
+    plan
+}
+
+/// `acc + sample_i + ...` over the zero-padded samples `i` of `run.0..=run.1` at `q0 + i dq`,
+/// added in order.
+pub(crate) fn sum_padded<R: Real>(
+    grid: &Grid<R>,
+    q0: [f64; 3],
+    dq: [f64; 3],
+    run: (i64, i64),
+    mut acc: R,
+) -> R {
+    for i in run.0..=run.1 {
+        acc += sample_padded(grid, at(q0, dq, i));
+    }
+    acc
+}
+
+/// The ray through pixel (`col`, `row`) up to its fast path (see [`Plan`]), its zero-padded
+/// samples before the fast path not summed yet (`before` is 0).
+pub(crate) fn plan_runs<R: Real>(
     grid: &Grid<R>,
     setup: &Setup,
     cam: &Camera,
@@ -159,6 +202,7 @@ pub(crate) fn plan<R: Real>(
         h,
         q0: [0.0; 3],
         dq: [0.0; 3],
+        before_run: (1, 0),
         before: R::zero(),
         fast: false,
         moved: R::zero(),
@@ -190,20 +234,14 @@ pub(crate) fn plan<R: Real>(
         },
         None => (i_hi + 1, i_hi),
     };
-    let mut acc = R::zero();
     if j_lo <= j_hi {
-        for i in i_lo..j_lo {
-            acc += sample_padded(grid, at(q0, dq, i));
-        }
+        plan.before_run = (i_lo, j_lo - 1);
         plan.fast = true;
         plan.march = fast_range(grid, q0, dq, j_lo, j_hi, &mut plan.moved);
         plan.after = (j_hi + 1, i_hi);
     } else {
-        for i in i_lo..=i_hi {
-            acc += sample_padded(grid, at(q0, dq, i));
-        }
+        plan.before_run = (i_lo, i_hi);
     }
-    plan.before = acc;
     plan
 }
 
@@ -212,19 +250,30 @@ pub(crate) fn plan<R: Real>(
 /// fast path.
 #[inline]
 pub(crate) fn finish<R: Real>(grid: &Grid<R>, plan: &Plan<R>, inner: R) -> R {
+    let acc = finish_start(plan, inner);
+    scale(plan, sum_padded(grid, plan.q0, plan.dq, plan.after, acc))
+}
+
+/// The ray's sum up to its samples after the fast path: `(before + inner) + moved`, or
+/// `before` when it has no fast path.
+#[inline]
+pub(crate) fn finish_start<R: Real>(plan: &Plan<R>, inner: R) -> R {
     let mut acc = plan.before;
     if plan.fast {
         acc += inner;
         acc += plan.moved;
     }
-    for i in plan.after.0..=plan.after.1 {
-        acc += sample_padded(grid, at(plan.q0, plan.dq, i));
-    }
-    acc * R::c(plan.h)
+    acc
+}
+
+/// The ray's value from its whole sum: `sum x h`.
+#[inline]
+pub(crate) fn scale<R: Real>(plan: &Plan<R>, sum: R) -> R {
+    sum * R::c(plan.h)
 }
 
 #[inline(always)]
-fn at(q0: [f64; 3], dq: [f64; 3], i: i64) -> [f64; 3] {
+pub(crate) fn at(q0: [f64; 3], dq: [f64; 3], i: i64) -> [f64; 3] {
     let f = i as f64;
     [q0[0] + f * dq[0], q0[1] + f * dq[1], q0[2] + f * dq[2]]
 }
