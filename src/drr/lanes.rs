@@ -423,15 +423,14 @@ unsafe impl<const VL: bool> SampleLanes for Avx2<VL> {
                     pair(data, idx, off, $k)
                 };
             }
-            let a = _mm256_castsi256_ps(_mm256_set_epi64x(q!(3), q!(2), q!(1), q!(0)));
-            let b = _mm256_castsi256_ps(_mm256_set_epi64x(q!(7), q!(6), q!(5), q!(4)));
-            // Within 128-bit halves: [a0 a2 b0 b2 | a4 a6 b4 b6] and the odd ones; then the
-            // 64-bit quarters in order 0, 2, 1, 3.
-            let even = _mm256_castps_pd(_mm256_shuffle_ps::<0x88>(a, b));
-            let odd = _mm256_castps_pd(_mm256_shuffle_ps::<0xdd>(a, b));
+            // The pairs of lanes 0, 1, 4, 5 and of lanes 2, 3, 6, 7 (64-bit quarters, lowest
+            // first): within each 128-bit half, the even floats of `a` then of `b` are four
+            // lanes' first values in lane order, and the odd ones their second values.
+            let a = _mm256_castsi256_ps(_mm256_set_epi64x(q!(5), q!(4), q!(1), q!(0)));
+            let b = _mm256_castsi256_ps(_mm256_set_epi64x(q!(7), q!(6), q!(3), q!(2)));
             (
-                _mm256_castpd_ps(_mm256_permute4x64_pd::<0xd8>(even)),
-                _mm256_castpd_ps(_mm256_permute4x64_pd::<0xd8>(odd)),
+                _mm256_shuffle_ps::<0x88>(a, b),
+                _mm256_shuffle_ps::<0xdd>(a, b),
             )
         }
     }
