@@ -34,7 +34,10 @@ unsafe fn sum_runs(data: &[f32], n: [usize; 3], runs: &mut [Run]) {
         const W: usize = 4;
         let upper = n.map(|v| _mm256_set1_pd(v as f64));
         let last = n.map(|v| _mm_set1_epi32(v as i32 - 1));
-        let (nx, nxy) = (_mm_set1_epi32(n[0] as i32), _mm_set1_epi32((n[0] * n[1]) as i32));
+        let (nx, nxy) = (
+            _mm_set1_epi32(n[0] as i32),
+            _mm_set1_epi32((n[0] * n[1]) as i32),
+        );
         let (minus1, one_d) = (_mm256_set1_pd(-1.0), _mm256_set1_pd(1.0));
         let (zero_i, one_i, one_f) = (_mm_setzero_si128(), _mm_set1_epi32(1), _mm_set1_ps(1.0));
         // Lane state: positions, sample index (f64), samples left, sum, run.
@@ -120,10 +123,8 @@ unsafe fn sum_runs(data: &[f32], n: [usize; 3], runs: &mut [Run]) {
                         );
                         for ux in 0..2 {
                             let w = _mm_mul_ps(_mm_mul_ps(wt[0][ux], wt[1][uy]), wt[2][uz]);
-                            let v = _mm_i32gather_ps::<4>(
-                                data.as_ptr(),
-                                _mm_add_epi32(at[0][ux], row),
-                            );
+                            let v =
+                                _mm_i32gather_ps::<4>(data.as_ptr(), _mm_add_epi32(at[0][ux], row));
                             sample = _mm_add_ps(sample, _mm_mul_ps(w, v));
                         }
                     }

@@ -96,7 +96,7 @@ impl RayLanes for State {
 /// # Safety
 /// The CPU supports `L`'s instruction set (the caller is compiled with it); `data` is the
 /// `n`-voxel grid (x fastest), `n[0] n[1] n[2] < 2^31`, `n[a] >= 2`; every march is one of
-/// [`super::trilinear::plan`] on that grid (so its positions satisfy `0 <= p[a] + k dp[a] <
+/// [`super::trilinear::plan_runs`] on that grid (so its positions satisfy `0 <= p[a] + k dp[a] <
 /// (n[a] - 1) 2^32`, all 8 neighbours in the grid) with `1 <= count < 2^31`; every slot is in
 /// `out`.
 #[inline(always)]
@@ -198,8 +198,8 @@ crate::simd::wide_kernels! {
     // SAFETY (both): as this function.
     run_avx2 => { unsafe { run::<super::lanes::Avx2>(data, n, &mut super::DynIter(rays), out) } }
     // 8 lanes here too: 16 (the corner pairs loaded per lane as on AVX2) measured slower on the
-    // CT (AP 1.34x the per-ray loop against 1.43x, lateral 1.49x against 1.81x), and AVX-512
-    // gathers of the pairs slower still (AP 0.87x); the path brings its encoding and 32
-    // registers, not the width.
+    // CT with an earlier version of this kernel (AP 1.34x the per-ray loop against 1.43x,
+    // lateral 1.49x against 1.81x), and AVX-512 gathers of the pairs slower still (AP 0.87x);
+    // the path brings its encoding, 32 registers and the unsigned conversion, not the width.
     run_avx512 => { unsafe { run::<super::lanes::Avx2Vl>(data, n, &mut super::DynIter(rays), out) } }
 }
