@@ -526,6 +526,35 @@ impl<'a, R: Real> Grid<'a, R> {
             hi,
         }
     }
+
+    /// The grid of `data` with `n` voxels of 1 mm from the origin.
+    #[cfg(test)]
+    fn unit(data: &'a [R], n: [usize; 3]) -> Self {
+        Grid {
+            data,
+            n,
+            s: [1.0; 3],
+            lo: [0.0; 3],
+            hi: n.map(|v| v as f64),
+        }
+    }
+}
+
+/// Voxel counts in `1..=max` per axis and values for them: both signs, zeros of both signs and
+/// tiny ones (products that underflow).
+#[cfg(test)]
+fn random_values<R: Real>(rng: &mut impl rand::Rng, max: usize) -> ([usize; 3], Vec<R>) {
+    use rand::RngExt;
+    let n = [0; 3].map(|_| rng.random_range(1..=max));
+    let data = (0..n[0] * n[1] * n[2])
+        .map(|_| match rng.random_range(0..6) {
+            0 => R::c(0.0),
+            1 => R::c(-0.0),
+            2 => R::c(rng.random_range(-1e-38..1e-38)),
+            _ => R::c(rng.random_range(-3.0..3.0)),
+        })
+        .collect();
+    (n, data)
 }
 
 /// Parameter interval `(t_near, t_far)` of the line `o + t d` inside the box `[lo, hi]` (slab

@@ -178,27 +178,14 @@ mod tests {
     use rand::{RngExt, SeedableRng};
 
     /// Runs of random lengths (empty ones too) through random grids (1-voxel axes, values of
-    /// both signs, zeros of both signs), from outside the padded box to inside the grid,
+    /// both signs, zeros of both signs, tiny ones), from outside the padded box to inside the grid,
     /// against the per-ray sum, bit for bit, on every vector path.
     #[test]
     fn lanes_sum_the_runs_as_the_per_ray_loop() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         for case in 0..300 {
-            let n = [0; 3].map(|_| rng.random_range(1..6usize));
-            let data: Vec<f32> = (0..n[0] * n[1] * n[2])
-                .map(|_| match rng.random_range(0..5) {
-                    0 => 0.0,
-                    1 => -0.0,
-                    _ => rng.random_range(-3.0..3.0),
-                })
-                .collect();
-            let grid = Grid {
-                data: &data,
-                n,
-                s: [1.0; 3],
-                lo: [0.0; 3],
-                hi: n.map(|v| v as f64),
-            };
+            let (n, data) = super::super::random_values::<f32>(&mut rng, 5);
+            let grid = Grid::unit(&data, n);
             let runs: Vec<Run> = (0..rng.random_range(0..12))
                 .map(|_| {
                     let first = rng.random_range(-40..40i64);

@@ -484,23 +484,8 @@ mod tests {
     fn check<R: Real>(seed: u64) {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         for _ in 0..200 {
-            let n = [0; 3].map(|_| rng.random_range(1..5usize));
-            // Values of both signs, zeros of both signs and tiny ones (products that underflow).
-            let data: Vec<R> = (0..n[0] * n[1] * n[2])
-                .map(|_| match rng.random_range(0..6) {
-                    0 => R::c(0.0),
-                    1 => R::c(-0.0),
-                    2 => R::c(rng.random_range(-1e-38..1e-38)),
-                    _ => R::c(rng.random_range(-3.0..3.0)),
-                })
-                .collect();
-            let grid = Grid {
-                data: &data,
-                n,
-                s: [1.0; 3],
-                lo: [0.0; 3],
-                hi: n.map(|v| v as f64),
-            };
+            let (n, data) = super::super::random_values::<R>(&mut rng, 4);
+            let grid = Grid::unit(&data, n);
             for _ in 0..200 {
                 // Outside, on the faces' half-voxel shells, on lattice points, inside.
                 let q = n.map(|na| match rng.random_range(0..4) {
