@@ -458,8 +458,8 @@ mod tests {
     use super::*;
     use crate::simd::Simd;
 
-    /// `u32_to_f`, `add_carry`, `and_i`, `sub_i` and `load_pairs` of `L` against their scalar definitions on values
-    /// where rounding and carries matter.
+    /// `u32_to_f`, `add_carry`, `and_i`, `sub_i` and `load_pairs` of `L` against their scalar
+    /// definitions on values where rounding and carries matter.
     #[inline(always)]
     unsafe fn check<L: SampleLanes>() {
         unsafe {

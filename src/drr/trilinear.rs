@@ -273,7 +273,7 @@ pub(crate) fn scale<R: Real>(plan: &Plan<R>, sum: R) -> R {
 }
 
 #[inline(always)]
-pub(crate) fn at(q0: [f64; 3], dq: [f64; 3], i: i64) -> [f64; 3] {
+fn at(q0: [f64; 3], dq: [f64; 3], i: i64) -> [f64; 3] {
     let f = i as f64;
     [q0[0] + f * dq[0], q0[1] + f * dq[1], q0[2] + f * dq[2]]
 }

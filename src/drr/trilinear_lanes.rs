@@ -201,5 +201,7 @@ crate::simd::wide_kernels! {
     // CT with an earlier version of this kernel (AP 1.34x the per-ray loop against 1.43x,
     // lateral 1.49x against 1.81x), and AVX-512 gathers of the pairs slower still (AP 0.87x);
     // the path brings its encoding, 32 registers and the unsigned conversion, not the width.
-    run_avx512 => { unsafe { run::<super::lanes::Avx2Vl>(data, n, &mut super::DynIter(rays), out) } }
+    run_avx512 => {
+        unsafe { run::<super::lanes::Avx2Vl>(data, n, &mut super::DynIter(rays), out) }
+    }
 }
