@@ -414,7 +414,8 @@ fn padded_runs(
 ) {
     runs.clear();
     runs.extend(plans.iter().zip(init).map(|((_, p), &acc)| {
-        let (first, last) = if lane_run(run(p)) { run(p) } else { (1, 0) };
+        let r = run(p);
+        let (first, last) = if lane_run(r) { r } else { (1, 0) };
         trilinear::Run {
             q0: p.q0,
             dq: p.dq,
