@@ -3,9 +3,9 @@
 //! weights and values in 128-bit ones), on both vector paths.
 //!
 //! These are the samples within half a voxel of the box faces on either side (some corner is
-//! outside the grid): about 2 % of a CT view's samples, but a fifth of its time in the per-ray
-//! loop (rays leaving through a face at a grazing angle spend dozens of samples there, each
-//! with its own floor, weights and eight reads).
+//! outside the grid): about 2 % of a CT view's samples, but about a sixth of its time in the
+//! per-ray loop (rays leaving through a face at a grazing angle spend dozens of samples there,
+//! each with its own floor, weights and eight reads).
 //!
 //! Each lane computes the per-ray loop's IEEE operations in its order, so the same bits: the
 //! position `q0 + i dq` in f64 (`i` counted in f64, exact), the range test, `floor` (the
