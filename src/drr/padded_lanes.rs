@@ -114,6 +114,8 @@ unsafe fn sum_runs(data: &[f32], n: [usize; 3], runs: &mut [Run]) {
                         _mm_and_ps(_mm_castsi128_ps(upper_in), f),
                     ];
                 }
+                // (Hoisting the row offsets and the products w_x w_y out of the corner loop
+                // measured slower: AP view 0.049 -> 0.051 s.)
                 let mut sample = _mm_setzero_ps();
                 for uz in 0..2 {
                     for uy in 0..2 {
