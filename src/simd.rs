@@ -109,6 +109,34 @@ impl Simd {
     }
 }
 
+/// Whether the CPU executes a 512-bit vector operation as two 256-bit halves (AMD Zen 4, the
+/// only AVX-512 CPU of AMD's family 19h), so that 16 lanes cost about what two steps of 8 do.
+/// Kernels whose best width was measured to differ between such CPUs and those with full-width
+/// 512-bit units ([`crate::drr::MarchLanes`]) ask this; it changes no result.
+pub fn splits_512_bit() -> bool {
+    static SPLITS: OnceLock<bool> = OnceLock::new();
+    *SPLITS.get_or_init(|| {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::__cpuid;
+            // Leaf 0: the vendor string in ebx, edx, ecx; leaf 1: the family in eax (base
+            // family bits 8-11, plus the extended family, bits 20-27, when the base is 15).
+            let v = __cpuid(0);
+            let amd = (v.ebx, v.edx, v.ecx) == (0x6874_7541, 0x6974_6e65, 0x444d_4163);
+            let eax = __cpuid(1).eax;
+            let base = (eax >> 8) & 0xf;
+            let family = if base == 0xf {
+                base + ((eax >> 20) & 0xff)
+            } else {
+                base
+            };
+            amd && family == 0x19
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        false
+    })
+}
+
 /// Two copies of a kernel entry point with one signature: the first compiled with AVX2 and FMA
 /// enabled, the second with AVX-512 F/BW/DQ/VL and FMA (the features [`Simd::supported`]
 /// checks), each running its own body. The bodies call `#[inline(always)]` generic code, which is

@@ -1,11 +1,12 @@
 //! The DRR's vector kernels against the per-ray loops: the same bits on every instruction set
-//! the CPU supports (`scalar` runs the per-ray loops), for 1, 2 and 8 threads, on random
+//! the CPU supports (`scalar` runs the per-ray loops; on AVX-512 the trilinear march on 8 and
+//! on 16 lanes), for 1, 2 and 8 threads, on random
 //! volumes and geometries, on rays that graze voxel faces and box edges, miss the box or run
 //! parallel to an axis.
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use unispine::drr::{Method, Projector};
+use unispine::drr::{MarchLanes, Method, Projector};
 use unispine::geometry::{ConeBeam, Mode};
 use unispine::simd::Simd;
 use unispine::volume::Volume;
@@ -23,22 +24,43 @@ fn random_volume(rng: &mut ChaCha8Rng, dims: [usize; 3], spacing: [f64; 3]) -> V
     v
 }
 
-/// Bits of the view of `vol` at `angle` with `simd`, or the error's text.
+/// An instruction set and, on AVX-512, the trilinear march's lanes.
+type Path = (Simd, MarchLanes);
+
+const SCALAR: Path = (Simd::Scalar, MarchLanes::Eight);
+
+/// Every path the CPU supports, the AVX-512 one with each march width.
+fn paths() -> Vec<Path> {
+    let mut out = Vec::new();
+    for simd in Simd::supported_paths() {
+        out.push((simd, MarchLanes::Eight));
+        if simd == Simd::Avx512 {
+            out.push((simd, MarchLanes::Sixteen));
+        }
+    }
+    out
+}
+
+fn name((simd, lanes): Path) -> String {
+    format!("{} ({} march lanes)", simd.name(), lanes.count())
+}
+
+/// Bits of the view of `vol` at `angle` on `path`, or the error's text.
 fn try_bits(
     vol: &Volume<f32>,
     geo: &ConeBeam,
     angle: f64,
     method: Method,
-    simd: Simd,
+    (simd, lanes): Path,
 ) -> Result<Vec<u32>, String> {
     Projector::new(vol, geo, method)
-        .and_then(|p| p.with_simd(simd).view(angle))
+        .and_then(|p| p.with_simd(simd).with_march_lanes(lanes).view(angle))
         .map(|img| img.data.iter().map(|v| v.to_bits()).collect())
         .map_err(|e| e.to_string())
 }
 
-fn bits(vol: &Volume<f32>, geo: &ConeBeam, angle: f64, method: Method, simd: Simd) -> Vec<u32> {
-    try_bits(vol, geo, angle, method, simd).unwrap()
+fn bits(vol: &Volume<f32>, geo: &ConeBeam, angle: f64, method: Method, path: Path) -> Vec<u32> {
+    try_bits(vol, geo, angle, method, path).unwrap()
 }
 
 /// Every supported path gives the scalar path's bits (or its error); returns how many pixels
@@ -46,22 +68,22 @@ fn bits(vol: &Volume<f32>, geo: &ConeBeam, angle: f64, method: Method, simd: Sim
 fn check_paths(vol: &Volume<f32>, geo: &ConeBeam, angle: f64, what: &str) -> usize {
     let mut nonzero = 0;
     for method in [Method::Siddon, Method::Trilinear] {
-        let want = match try_bits(vol, geo, angle, method, Simd::Scalar) {
+        let want = match try_bits(vol, geo, angle, method, SCALAR) {
             Ok(b) => b,
             Err(e) => {
-                for simd in Simd::supported_paths() {
-                    assert_eq!(try_bits(vol, geo, angle, method, simd), Err(e.clone()));
+                for path in paths() {
+                    assert_eq!(try_bits(vol, geo, angle, method, path), Err(e.clone()));
                 }
                 continue;
             }
         };
         nonzero = want.iter().filter(|&&b| f32::from_bits(b) != 0.0).count();
-        for simd in Simd::supported_paths() {
-            let got = bits(vol, geo, angle, method, simd);
+        for path in paths() {
+            let got = bits(vol, geo, angle, method, path);
             if let Some(k) = (0..want.len()).find(|&k| got[k] != want[k]) {
                 panic!(
                     "{what}, {method:?}, {}: pixel {k} (col {}, row {}) is {} (scalar {})",
-                    simd.name(),
+                    name(path),
                     k % geo.n_detector[1],
                     k / geo.n_detector[1],
                     f32::from_bits(got[k]),
@@ -165,15 +187,15 @@ fn every_path_is_thread_count_invariant() {
         ..ConeBeam::centred([45, 51], [1.9, 1.7], [37, 29, 23], [0.9, 1.1, 2.0])
     };
     for method in [Method::Siddon, Method::Trilinear] {
-        let want = bits(&vol, &geo, 0.7, method, Simd::Scalar);
-        for simd in Simd::supported_paths() {
+        let want = bits(&vol, &geo, 0.7, method, SCALAR);
+        for path in paths() {
             for t in [1, 2, 8] {
                 let pool = rayon::ThreadPoolBuilder::new()
                     .num_threads(t)
                     .build()
                     .unwrap();
-                let got = pool.install(|| bits(&vol, &geo, 0.7, method, simd));
-                assert!(got == want, "{method:?} {} with {t} threads", simd.name());
+                let got = pool.install(|| bits(&vol, &geo, 0.7, method, path));
+                assert!(got == want, "{method:?} {} with {t} threads", name(path));
             }
         }
     }

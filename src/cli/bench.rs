@@ -255,7 +255,7 @@ fn print_phases(t: &RenderTiming) {
 
 fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
     use crate::drr::bench::{time_case, BENCH_REPS, BENCH_SIZES, TARGET_S};
-    use crate::drr::Method;
+    use crate::drr::{MarchLanes, Method};
     use crate::simd::Simd;
     let check = |flag: &str, v: usize, (lo, hi): (usize, usize)| {
         if v < lo || v > hi {
@@ -324,8 +324,25 @@ fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     );
+    // The trilinear march on AVX-512 runs 8 or 16 lanes (`MarchLanes`): both are timed, the
+    // default for this CPU first.
+    let default_lanes = MarchLanes::for_this_cpu();
+    let other_lanes = match default_lanes {
+        MarchLanes::Eight => MarchLanes::Sixteen,
+        MarchLanes::Sixteen => MarchLanes::Eight,
+    };
     println!(
-        "{:>9} {:>5} {:>5} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11} {:>11} {:>8} {:>9}",
+        "trilinear on avx512: {} lanes by default on this CPU (avx512/N = N lanes; 512-bit \
+         operations {}), the other width timed too",
+        default_lanes.count(),
+        if crate::simd::splits_512_bit() {
+            "split in two halves"
+        } else {
+            "full width"
+        }
+    );
+    println!(
+        "{:>9} {:>5} {:>5} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>11} {:>11} {:>8} {:>9}",
         "method",
         "view",
         "size",
@@ -343,18 +360,26 @@ fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
     for &size in &sizes {
         for method in [Method::Siddon, Method::Trilinear] {
             for (view, deg) in [("AP", 90.0), ("lat", 0.0)] {
-                let t = time_case(&vol, method, deg, size, args.reps, &paths)?;
+                let mut case_paths: Vec<_> = paths.iter().map(|&p| (p, default_lanes)).collect();
+                if method == Method::Trilinear && paths.contains(&Simd::Avx512) {
+                    case_paths.push((Simd::Avx512, other_lanes));
+                }
+                let t = time_case(&vol, method, deg, size, args.reps, &case_paths)?;
                 let base_cpu = t.paths[0].extra_cpu;
                 let threads = rayon::current_num_threads() as f64;
                 for p in &t.paths {
                     // The target is per 256^2 view: scale by the pixel count.
                     let target = TARGET_S * (size * size) as f64 / (256.0 * 256.0);
                     let line = format!(
-                        "{:>9} {:>5} {:>5} {:>7} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.2} {:>11.3e} {:>11.3e} {:>8} {:>8.0}%",
+                        "{:>9} {:>5} {:>5} {:>9} {:>9.3} {:>9.3} {:>9.3} {:>9.3} {:>9.2} {:>11.3e} {:>11.3e} {:>8} {:>8.0}%",
                         format!("{method:?}").to_lowercase(),
                         view,
                         size,
-                        p.simd.name(),
+                        if method == Method::Trilinear && p.simd == Simd::Avx512 {
+                            format!("avx512/{}", p.march_lanes)
+                        } else {
+                            p.simd.name().to_string()
+                        },
                         p.first_wall,
                         p.extra_wall,
                         p.extra_cpu,

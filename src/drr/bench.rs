@@ -12,7 +12,7 @@
 
 use std::time::Instant;
 
-use super::{clip_ray, siddon, trilinear, Method, Projector};
+use super::{clip_ray, siddon, trilinear, MarchLanes, Method, Projector};
 use crate::error::Result;
 use crate::geometry::ConeBeam;
 use crate::real::Real;
@@ -43,6 +43,8 @@ pub fn bench_geometry<R: Real>(vol: &Volume<R>, size: usize) -> ConeBeam {
 #[derive(Clone, Debug)]
 pub struct PathTiming {
     pub simd: Simd,
+    /// The trilinear march's lanes ([`Projector::march_lanes`]).
+    pub march_lanes: usize,
     /// First view: projector checks (every voxel finite) and one view; wall and CPU seconds.
     pub first_wall: f64,
     pub first_cpu: f64,
@@ -103,8 +105,9 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// Time `method` at `angle_deg` with a `size`^2 detector on each of `paths` (unsupported ones
-/// run their widest supported narrower path, as [`Projector::with_simd`] does). Checks that
+/// Time `method` at `angle_deg` with a `size`^2 detector on each of `paths` (an instruction set
+/// and the trilinear march's lanes on AVX-512; unsupported instruction sets run their widest
+/// supported narrower one, as [`Projector::with_simd`] does). Checks that
 /// every path gives the same bits as the first (an error otherwise). The extra views take turns
 /// (one of each path per round), so a drift of the machine's speed during the case affects every
 /// path alike and the ratios between paths stay comparable.
@@ -114,7 +117,7 @@ pub fn time_case(
     angle_deg: f64,
     size: usize,
     reps: usize,
-    paths: &[Simd],
+    paths: &[(Simd, MarchLanes)],
 ) -> Result<DrrTiming> {
     let geo = bench_geometry(vol, size);
     let angle = angle_deg.to_radians();
@@ -130,9 +133,10 @@ pub fn time_case(
     };
     let mut first_bits: Option<Vec<u32>> = None;
     let mut projectors = Vec::new();
-    for &simd in paths {
-        let (img, first_wall, first_cpu) =
-            timed(|| Projector::new(vol, &geo, method).and_then(|p| p.with_simd(simd).view(angle)));
+    for &(simd, lanes) in paths {
+        let projector =
+            || Projector::new(vol, &geo, method).map(|p| p.with_simd(simd).with_march_lanes(lanes));
+        let (img, first_wall, first_cpu) = timed(|| projector().and_then(|p| p.view(angle)));
         let img = img?;
         if out.paths.is_empty() && reset {
             out.peak_rss = peak_rss_bytes();
@@ -144,14 +148,15 @@ pub fn time_case(
                 return Err(crate::Error::Geometry(format!(
                     "{method:?} at {angle_deg} deg: the {} path differs from the {} path",
                     simd.name(),
-                    paths[0].name()
+                    paths[0].0.name()
                 )))
             }
             Some(_) => {}
         }
-        let p = Projector::new(vol, &geo, method)?.with_simd(simd);
+        let p = projector()?;
         out.paths.push(PathTiming {
             simd: p.simd(),
+            march_lanes: p.march_lanes(),
             first_wall,
             first_cpu,
             extra_wall: 0.0,
@@ -212,12 +217,24 @@ mod tests {
         for (i, v) in vol.data.iter_mut().enumerate() {
             *v = (i % 7) as f32 * 0.25;
         }
-        let paths = Simd::supported_paths();
+        let mut paths: Vec<_> = Simd::supported_paths()
+            .into_iter()
+            .map(|p| (p, MarchLanes::Eight))
+            .collect();
+        if Simd::Avx512.supported() {
+            paths.push((Simd::Avx512, MarchLanes::Sixteen));
+        }
         for method in [Method::Siddon, Method::Trilinear] {
             let t = time_case(&vol, method, 30.0, 16, 3, &paths).unwrap();
             assert_eq!(t.paths.len(), paths.len());
-            for (p, &want) in t.paths.iter().zip(&paths) {
-                assert_eq!(p.simd, want);
+            for (p, &(simd, lanes)) in t.paths.iter().zip(&paths) {
+                assert_eq!(p.simd, simd);
+                let want = match simd {
+                    Simd::Scalar => 1,
+                    Simd::Avx2 => 8,
+                    Simd::Avx512 => lanes.count(),
+                };
+                assert_eq!(p.march_lanes, want);
                 assert!(p.extra_wall > 0.0 && p.extra_wall.is_finite(), "{p:?}");
                 assert!(p.extra_cpu >= 0.0 && p.first_wall > 0.0, "{p:?}");
             }

@@ -137,9 +137,9 @@ pub(crate) fn hand_over<S: RayLanes>(
     active
 }
 
-/// The further operations of the trilinear kernel ([`super::trilinear_lanes`]), which runs
-/// 8 lanes on both vector paths: implemented by [`Avx2`] only (the AVX-512 path
-/// calls it from code compiled with AVX-512 enabled).
+/// The further operations of the trilinear kernel ([`super::trilinear_lanes`]): 16 lanes
+/// ([`Avx512`]) or 8 ([`Avx2`], which the AVX-512 path also runs, from code compiled with
+/// AVX-512 enabled, where 512-bit operations run as two halves).
 ///
 /// # Safety
 /// As [`Lanes`].
@@ -256,6 +256,73 @@ unsafe impl Lanes for Avx512 {
     #[inline(always)]
     unsafe fn gather(m: __mmask16, idx: __m512i, data: &[f32]) -> __m512 {
         unsafe { _mm512_mask_i32gather_ps::<4>(_mm512_setzero_ps(), m, idx, data.as_ptr()) }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+unsafe impl SampleLanes for Avx512 {
+    #[inline(always)]
+    unsafe fn splat_f(x: f32) -> __m512 {
+        unsafe { _mm512_set1_ps(x) }
+    }
+    #[inline(always)]
+    unsafe fn sub_i(a: __m512i, b: __m512i) -> __m512i {
+        unsafe { _mm512_sub_epi32(a, b) }
+    }
+    #[inline(always)]
+    unsafe fn and_i(a: __m512i, b: __m512i) -> __m512i {
+        unsafe { _mm512_and_si512(a, b) }
+    }
+    #[inline(always)]
+    unsafe fn u32_to_f(a: __m512i) -> __m512 {
+        // Round to nearest even, the default mode.
+        unsafe { _mm512_cvtepu32_ps(a) }
+    }
+    #[inline(always)]
+    unsafe fn add_carry(lo: __m512i, dlo: __m512i) -> (__m512i, __m512i) {
+        unsafe {
+            let sum = _mm512_add_epi32(lo, dlo);
+            (sum, _mm512_movm_epi32(_mm512_cmplt_epu32_mask(sum, dlo)))
+        }
+    }
+    #[inline(always)]
+    unsafe fn load_pairs(data: &[f32], idx: __m512i, off: usize) -> (__m512, __m512) {
+        // As on AVX2, per 128-bit quarter: the pairs of lanes 4j, 4j + 1 in `a`, of lanes
+        // 4j + 2, 4j + 3 in `b`.
+        unsafe {
+            let mut at = [0i32; 16];
+            Self::store_i(idx, &mut at);
+            let idx = &at;
+            macro_rules! q {
+                ($k:expr) => {
+                    pair(data, idx, off, $k)
+                };
+            }
+            let a = _mm512_castsi512_ps(_mm512_set_epi64(
+                q!(13),
+                q!(12),
+                q!(9),
+                q!(8),
+                q!(5),
+                q!(4),
+                q!(1),
+                q!(0),
+            ));
+            let b = _mm512_castsi512_ps(_mm512_set_epi64(
+                q!(15),
+                q!(14),
+                q!(11),
+                q!(10),
+                q!(7),
+                q!(6),
+                q!(3),
+                q!(2),
+            ));
+            (
+                _mm512_shuffle_ps::<0x88>(a, b),
+                _mm512_shuffle_ps::<0xdd>(a, b),
+            )
+        }
     }
 }
 
@@ -537,7 +604,7 @@ mod tests {
         // The AVX2 operations, also as the AVX-512 path compiles them.
         unsafe fn []();
         check_avx2 => { unsafe { check::<Avx2>() } }
-        check_avx512 => { unsafe { check::<Avx2>(); check::<Avx2Vl>() } }
+        check_avx512 => { unsafe { check::<Avx2>(); check::<Avx2Vl>(); check::<Avx512>() } }
     }
 
     #[test]

@@ -112,6 +112,38 @@ pub struct Projector<'a, R: Real> {
     geo: &'a ConeBeam,
     method: Method,
     simd: Simd,
+    march: MarchLanes,
+}
+
+/// Lanes of the trilinear ray-march on the AVX-512 path (the AVX2 path runs 8; the scalar path
+/// the per-ray loop). Every choice gives the same bits; only the speed differs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MarchLanes {
+    /// 8 lanes (AVX2's operations with AVX-512's unsigned conversion), tiles of 4 x 2 rays.
+    Eight,
+    /// 16 lanes, tiles of 8 x 2 rays.
+    Sixteen,
+}
+
+impl MarchLanes {
+    /// The faster choice as measured on the CPU kind: 8 where 512-bit operations run as two
+    /// halves (AMD Zen 4: 16 lanes were slower there), 16 elsewhere (AMD Zen 5: lateral view
+    /// 0.063 -> 0.050 s per 256^2 view of the example CT; see `docs/measurements.md`).
+    pub fn for_this_cpu() -> MarchLanes {
+        if crate::simd::splits_512_bit() {
+            MarchLanes::Eight
+        } else {
+            MarchLanes::Sixteen
+        }
+    }
+
+    /// The number of lanes.
+    pub fn count(self) -> usize {
+        match self {
+            MarchLanes::Eight => 8,
+            MarchLanes::Sixteen => 16,
+        }
+    }
 }
 
 impl<'a, R: Real> Projector<'a, R> {
@@ -126,6 +158,7 @@ impl<'a, R: Real> Projector<'a, R> {
             geo,
             method,
             simd: Simd::active(),
+            march: MarchLanes::for_this_cpu(),
         })
     }
 
@@ -139,6 +172,23 @@ impl<'a, R: Real> Projector<'a, R> {
     /// The instruction set the projector runs.
     pub fn simd(&self) -> Simd {
         self.simd
+    }
+
+    /// The same projector running the trilinear march on `lanes` on the AVX-512 path (default
+    /// [`MarchLanes::for_this_cpu`]); no effect on the other paths. The same bits either way.
+    pub fn with_march_lanes(mut self, lanes: MarchLanes) -> Self {
+        self.march = lanes;
+        self
+    }
+
+    /// The lanes of the trilinear march: 16 or 8 on the AVX-512 path, 8 on AVX2, 1 on the
+    /// scalar path (the per-ray loop).
+    pub fn march_lanes(&self) -> usize {
+        match self.simd {
+            Simd::Avx512 => self.march.count(),
+            Simd::Avx2 => 8,
+            Simd::Scalar => 1,
+        }
     }
 
     /// The projection at `angle` (radians).
@@ -170,7 +220,7 @@ impl<'a, R: Real> Projector<'a, R> {
                 Method::Trilinear => {
                     if let Some((grid, out)) = lanes_f32(self.simd, &self.grid, out) {
                         let band = (out, w, b * BAND);
-                        return trilinear_band(self.simd, &grid, &setup, &cam, band);
+                        return trilinear_band(self.simd, self.march, &grid, &setup, &cam, band);
                     }
                     for_each_pixel(out, w, b * BAND, TILE, cols_inner, |col, row| {
                         trilinear::pixel(&self.grid, &setup, &cam, col, row)
@@ -315,6 +365,7 @@ fn siddon_band(
 /// loop's order ([`trilinear::finish_start`]).
 fn trilinear_band(
     simd: Simd,
+    march: MarchLanes,
     grid: &Grid<f32>,
     setup: &trilinear::Setup,
     cam: &Camera,
@@ -322,10 +373,11 @@ fn trilinear_band(
 ) -> usize {
     let rows = out.len() / w;
     let mut hits = 0;
-    let (tile_rows, tile_cols) = LANE_TILE;
+    let wide = simd == Simd::Avx512 && march == MarchLanes::Sixteen;
+    let (tile_rows, tile_cols) = if wide { LANE_TILE_16 } else { LANE_TILE };
     let mut plans = Vec::with_capacity(tile_rows * tile_cols);
     let mut runs = Vec::with_capacity(tile_rows * tile_cols);
-    let mut inner = [0.0f32; LANE_TILE.0 * LANE_TILE.1];
+    let mut inner = [0.0f32; lanes::MAXW];
     for r0 in (0..rows).step_by(tile_rows) {
         for c0 in (0..w).step_by(tile_cols) {
             plans.clear();
@@ -336,7 +388,7 @@ fn trilinear_band(
                 }
             }
             // The samples before the inner loops, from 0.
-            let mut sums = [0.0f32; LANE_TILE.0 * LANE_TILE.1];
+            let mut sums = [0.0f32; lanes::MAXW];
             padded_runs(simd, grid, &plans, |p| p.before_run, &sums, &mut runs);
             for (k, (_, p)) in plans.iter_mut().enumerate() {
                 p.before = if lane_run(p.before_run) {
@@ -359,6 +411,9 @@ fn trilinear_band(
             // count in [1, 2^31); every slot `k` is in `inner` (one per pixel of the tile).
             unsafe {
                 match simd {
+                    Simd::Avx512 if wide => {
+                        trilinear_lanes::run_avx512_16(grid.data, grid.n, &mut rays, &mut inner)
+                    }
                     Simd::Avx512 => {
                         trilinear_lanes::run_avx512(grid.data, grid.n, &mut rays, &mut inner)
                     }
@@ -464,6 +519,12 @@ const TILE: usize = 32;
 /// 200 deg 11.4 / 12.5 / 11.0 / 9.7 against 11.8 / 13.9 / 11.8 / 9.3; 2 x 4 tiles: AP 8.4,
 /// lateral 12.6; 8 x 1: AP 15.2 (`bench drr`: 0.093 s against 0.052 s).
 const LANE_TILE: (usize, usize) = (4, 2);
+/// The same for 16 lanes ([`MarchLanes::Sixteen`]). On AMD Zen 5 (`bench drr`, cpu/thr, AP /
+/// lateral): 8 x 2 0.039 / 0.050 s, 4 x 4 0.035 / 0.051 s (but 15-20 % slower than 8 lanes at
+/// 30 and 135 deg, where 8 x 2 is even), 2 x 8 0.038 / 0.063 s, 16 x 1 1.5x slower at 0, 30 and
+/// 90 deg. Tiles stack rows of the detector (v, along z in these views), whose neighbouring
+/// rays share z planes in the lateral view.
+const LANE_TILE_16: (usize, usize) = (8, 2);
 
 /// Fill the band `out` (whole image rows, the first one being `row0`, `w` pixels each) with
 /// `f(col, row) = (value, hit)` tile by tile: for each block of `tile` columns, row by row

@@ -1,5 +1,6 @@
 //! The trilinear ray-march's inner loop ([`super::trilinear::march_scalar`]) over vector lanes,
-//! one ray per lane (f32 volumes; 8 lanes on both vector paths, see `run_avx512`).
+//! one ray per lane (f32 volumes; 8 lanes on AVX2, 8 or 16 on AVX-512, see
+//! [`super::MarchLanes`]).
 //!
 //! Each lane runs the per-ray loop step for step: its 32.32 fixed-point position is the scalar
 //! loop's `p + k dp`, held as the three low (fractional) 32-bit halves and the index of the lower
@@ -185,7 +186,7 @@ pub(crate) unsafe fn run<L: SampleLanes>(
 }
 
 crate::simd::wide_kernels! {
-    /// [`run`] compiled for AVX2 (`run_avx2`) or AVX-512 (`run_avx512`).
+    /// [`run`] compiled for AVX2 (`run_avx2`) or AVX-512 (`run_avx512`), 8 lanes each.
     ///
     /// # Safety
     /// As [`run`], on a CPU with the instruction set.
@@ -197,11 +198,29 @@ crate::simd::wide_kernels! {
     );
     // SAFETY (both): as this function.
     run_avx2 => { unsafe { run::<super::lanes::Avx2>(data, n, &mut super::DynIter(rays), out) } }
-    // 8 lanes here too: 16 (the corner pairs loaded per lane as on AVX2) measured slower on the
-    // CT with an earlier version of this kernel (AP 1.34x the per-ray loop against 1.43x,
-    // lateral 1.49x against 1.81x), and AVX-512 gathers of the pairs slower still (AP 0.87x);
-    // the path brings its encoding, 32 registers and the unsigned conversion, not the width.
+    // AVX2's 8 lanes with AVX-512's encoding, 32 registers and unsigned conversion: where
+    // 512-bit operations run as two halves (AMD Zen 4), 16 lanes measured slower (AP view 1.34x
+    // the per-ray loop against 1.43x, lateral 1.49x against 1.81x, an earlier version of this
+    // kernel), and AVX-512 gathers of the pairs slower still (AP 0.87x).
     run_avx512 => {
         unsafe { run::<super::lanes::Avx2Vl>(data, n, &mut super::DynIter(rays), out) }
     }
+}
+
+/// [`run`] on 16 lanes, compiled for AVX-512 ([`super::MarchLanes::Sixteen`]). On AMD Zen 5,
+/// whose 512-bit units are full width, gathers of the pairs (two 8-pair gathers and two
+/// permutes per row) were slower than the 64-bit loads (lateral view 0.056 against 0.050 s).
+///
+/// # Safety
+/// As [`run`], on a CPU with AVX-512 F/BW/DQ/VL.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512dq,avx512vl,fma")]
+pub(crate) unsafe fn run_avx512_16(
+    data: &[f32],
+    n: [usize; 3],
+    rays: &mut dyn Iterator<Item = (usize, March)>,
+    out: &mut [f32],
+) {
+    // SAFETY: as this function.
+    unsafe { run::<super::lanes::Avx512>(data, n, &mut super::DynIter(rays), out) }
 }
