@@ -389,7 +389,7 @@ fn trilinear_band(
             }
             // The samples before the inner loops, from 0.
             let mut sums = [0.0f32; lanes::MAXW];
-            padded_runs(simd, grid, &plans, |p| p.before_run, &sums, &mut runs);
+            padded_runs(simd, wide, grid, &plans, |p| p.before_run, &sums, &mut runs);
             for (k, (_, p)) in plans.iter_mut().enumerate() {
                 p.before = if lane_run(p.before_run) {
                     runs[k].acc
@@ -435,7 +435,7 @@ fn trilinear_band(
                 };
                 sums[k] = trilinear::finish_start(p, inner);
             }
-            padded_runs(simd, grid, &plans, |p| p.after, &sums, &mut runs);
+            padded_runs(simd, wide, grid, &plans, |p| p.after, &sums, &mut runs);
             for (k, (slot, p)) in plans.iter().enumerate() {
                 let sum = if lane_run(p.after) {
                     runs[k].acc
@@ -458,9 +458,11 @@ fn lane_run((first, last): (i64, i64)) -> bool {
 }
 
 /// `runs[k].acc` = `init[k]` plus the zero-padded samples `run(plan k)` of the tile's plans,
-/// summed on the lanes of `simd` (an empty run for the runs that [`lane_run`] leaves per ray).
+/// summed on the lanes of `simd` (an empty run for the runs that [`lane_run`] leaves per ray):
+/// with `wide` (16 march lanes) on AVX-512's 8 lanes, else on AVX2's 4.
 fn padded_runs(
     simd: Simd,
+    wide: bool,
     grid: &Grid<f32>,
     plans: &[(usize, trilinear::Plan<f32>)],
     run: impl Fn(&trilinear::Plan<f32>) -> (i64, i64),
@@ -484,8 +486,8 @@ fn padded_runs(
     // (`lanes_f32`); every run has fewer than 2^31 samples of index below 2^52 (`lane_run`).
     unsafe {
         match simd {
-            Simd::Avx512 => padded_lanes::sum_runs_avx512(grid.data, grid.n, runs),
-            Simd::Avx2 => padded_lanes::sum_runs_avx2(grid.data, grid.n, runs),
+            Simd::Avx512 if wide => padded_lanes::sum_runs_avx512(grid.data, grid.n, runs),
+            Simd::Avx512 | Simd::Avx2 => padded_lanes::sum_runs_avx2(grid.data, grid.n, runs),
             Simd::Scalar => unreachable!("the scalar path runs the per-ray loop"),
         }
     }

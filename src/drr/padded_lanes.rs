@@ -1,6 +1,8 @@
 //! The trilinear ray-march's zero-padded samples ([`super::trilinear::sum_padded`]) over vector
-//! lanes: one run of a ray's samples per lane; on AVX2 4 lanes (f64 positions in 256-bit
-//! vectors, f32 weights and values in 128-bit ones), on AVX-512 8 (512-bit and 256-bit).
+//! lanes: one run of a ray's samples per lane; 4 lanes with AVX2 (f64 positions in 256-bit
+//! vectors, f32 weights and values in 128-bit ones), 8 with AVX-512 (512-bit and 256-bit),
+//! which the AVX-512 path runs with the 16-lane march ([`super::MarchLanes::Sixteen`]; with 8
+//! march lanes it keeps the 4 lanes).
 //!
 //! These are the samples within half a voxel of the box faces on either side (some corner is
 //! outside the grid): about 2 % of a CT view's samples, but about a sixth of its time in the
