@@ -89,7 +89,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 50)]
     pub views: usize,
     /// `train`: warm-up iterations before timing; with `--model`, the schedule position the
-    /// model starts at instead.
+    /// model starts at instead (then one untimed iteration runs before the timed ones).
     #[arg(long, default_value_t = 1000)]
     pub warmup: usize,
     /// `train`: start from this model (`model.ply` of a run, or its run folder) instead of

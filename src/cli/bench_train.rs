@@ -51,7 +51,11 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         crate::simd::Simd::active().name(),
         iters,
         match &args.model {
-            Some(p) => format!("loading {} at iteration {}", p.display(), args.warmup),
+            Some(p) => format!(
+                "loading {} at iteration {} and one untimed iteration",
+                p.display(),
+                args.warmup
+            ),
             None => format!("a warm-up of {} iterations", args.warmup),
         }
     );
