@@ -61,9 +61,9 @@ fn stage_timers_change_no_bit_and_sum_to_the_step() {
 #[test]
 fn bench_amortises_densification_and_sums_to_the_step() {
     let ds = dataset();
-    // From a model at schedule position 599: iterations 600..=602, an event at 600 (the
-    // preset densifies every 200 iterations in (500, 8000)).
-    let b = train_bench::time_train(&ds, 599, 3, Some(hidden().cast())).unwrap();
+    // From a model at schedule position 598: iteration 599 untimed, then 600..=602 timed, an
+    // event at 600 (the preset densifies every 200 iterations in (500, 8000)).
+    let b = train_bench::time_train(&ds, 598, 3, Some(hidden().cast())).unwrap();
     assert_eq!(b.first_iteration, 600);
     assert_eq!(b.stages.steps, 3);
     assert_eq!(b.stages.n_densify_events, 1);
@@ -87,7 +87,8 @@ fn bench_amortises_densification_and_sums_to_the_step() {
         assert!(share > 0.0 && share < 1.0, "{share}");
         assert!((share - (1.0 - (v[0] + v[2]) / b.step(clock))).abs() < 1e-12);
     }
-    // No event in the window (601..=603): one is timed on a copy of the state.
+    // No event in the window (602..=604, after the untimed 601): one is timed on a copy of
+    // the state.
     let b = train_bench::time_train(&ds, 600, 3, Some(hidden().cast())).unwrap();
     assert_eq!(b.stages.n_densify_events, 0);
     assert!(b.densify_phase && b.densify_event.0 > 0.0 && b.densify_event.1 > 0.0);
