@@ -1,11 +1,11 @@
 //! Vector lanes of the DRR kernels: f32 values, i32 voxel indices.
 //!
 //! The kernels ([`super::siddon_lanes`]: one ray per lane, AVX-512 16 lanes and AVX2 8;
-//! [`super::trilinear_lanes`]: one ray per lane, 8 lanes on both paths, with the
-//! further operations of [`SampleLanes`]) are written once against [`Lanes`]; the scalar path
-//! runs the per-ray loops of [`super::siddon`] and [`super::trilinear`] ([`super::padded_lanes`],
-//! the trilinear march's zero-padded samples on 4 lanes of f64 positions, is written in AVX2
-//! directly). Every lane performs
+//! [`super::trilinear_lanes`]: one ray per lane, 8 lanes on AVX2, 8 or 16 on AVX-512, with
+//! the further operations of [`SampleLanes`]) are written once against [`Lanes`]; the scalar
+//! path runs the per-ray loops of [`super::siddon`] and [`super::trilinear`]
+//! ([`super::padded_lanes`], the trilinear march's zero-padded samples on 4 or 8 lanes of f64
+//! positions, is written in AVX2 and AVX-512 directly). Every lane performs
 //! the IEEE operations of the per-ray loop in the same order (no fused multiply-add anywhere),
 //! so every path gives the same bits (`tests/drr_simd.rs` compares them).
 

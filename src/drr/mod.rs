@@ -21,10 +21,11 @@
 //!   run time, [`Projector::with_simd`]): each lane walks one ray with the per-ray loop's
 //!   comparisons and IEEE operations in its order, so every instruction set gives the per-ray
 //!   loop's bits ([`Simd::Scalar`] and f64 volumes run that loop). Trilinear's inner loop runs
-//!   the same way, one ray per lane (8 lanes on both paths), the rest of each ray (its set-up
-//!   and the zero-padded samples near the box faces) per ray, so it too gives the per-ray
-//!   loop's bits on every path.
+//!   the same way, one ray per lane (8 lanes on AVX2; 16 or 8 on AVX-512, [`MarchLanes`]), the
+//!   rest of each ray (its set-up and the zero-padded samples near the box faces) per ray, so
+//!   it too gives the per-ray loop's bits on every path.
 //!
+//! [`MarchLanes`]: crate::drr::MarchLanes
 //! [`Projector::with_simd`]: crate::drr::Projector::with_simd
 //! [`Simd::Scalar`]: crate::simd::Simd::Scalar
 
@@ -128,7 +129,8 @@ pub enum MarchLanes {
 impl MarchLanes {
     /// The faster choice as measured on the CPU kind: 8 where 512-bit operations run as two
     /// halves (AMD Zen 4: 16 lanes were slower there), 16 elsewhere (AMD Zen 5: lateral view
-    /// 0.063 -> 0.050 s per 256^2 view of the example CT; see `docs/measurements.md`).
+    /// 0.060-0.062 -> 0.047 s per 256^2 view of the example CT, see `docs/measurements.md`;
+    /// other CPUs with AVX-512 were not measured).
     pub fn for_this_cpu() -> MarchLanes {
         if crate::simd::splits_512_bit() {
             MarchLanes::Eight
@@ -522,9 +524,9 @@ const TILE: usize = 32;
 /// lateral 12.6; 8 x 1: AP 15.2 (`bench drr`: 0.093 s against 0.052 s).
 const LANE_TILE: (usize, usize) = (4, 2);
 /// The same for 16 lanes ([`MarchLanes::Sixteen`]). On AMD Zen 5 (`bench drr`, cpu/thr, AP /
-/// lateral): 8 x 2 0.039 / 0.050 s, 4 x 4 0.035 / 0.051 s (but 15-20 % slower than 8 lanes at
-/// 30 and 135 deg, where 8 x 2 is even), 2 x 8 0.038 / 0.063 s, 16 x 1 1.5x slower at 0, 30 and
-/// 90 deg. Tiles stack rows of the detector (v, along z in these views), whose neighbouring
+/// lateral): 8 x 2 0.039 / 0.050 s, 4 x 4 0.035 / 0.051 s (but 10-20 % slower than 8 lanes at
+/// 30 and 135 deg, where 8 x 2 is within 5 %), 2 x 8 0.038 / 0.063 s, 16 x 1 1.5x slower at 0,
+/// 30 and 90 deg. Tiles stack rows of the detector (v, along z in these views), whose neighbouring
 /// rays share z planes in the lateral view.
 const LANE_TILE_16: (usize, usize) = (8, 2);
 
