@@ -78,6 +78,31 @@ fn blend_lanes<R: Real, const L: usize>(
     stops
 }
 
+/// Counts the pixels of tile row `r` that stopped (`stops`, one lane per column) into the
+/// per-half and tile counts, and marks the halves left with nothing to blend in `done_bits`.
+/// Pixels stop rarely (once each): the counts run only when one did.
+#[inline(always)]
+fn count_stops(
+    stops: &[u32; TILE],
+    r: usize,
+    half_len: &[u32; 2],
+    half_done: &mut [[u32; 2]; TILE],
+    n_done: &mut u32,
+    done_bits: &mut u32,
+) {
+    if stops.iter().fold(0, |a, &s| a | s) == 0 {
+        return;
+    }
+    for (h, s) in stops.chunks_exact(8).enumerate() {
+        let nd: u32 = s.iter().sum();
+        *n_done += nd;
+        half_done[r][h] += nd;
+        if half_done[r][h] == half_len[h] {
+            *done_bits |= 1 << (2 * r + h);
+        }
+    }
+}
+
 /// The forward kernel of tile `t`, `W` pixels per lane vector (8: one 8-column half of a tile
 /// row, the AVX2 width; 16: a whole tile row, the AVX-512 width, or one half of it where only
 /// that half is visited). Both widths do the same IEEE operations per pixel and give the same
@@ -88,6 +113,7 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
     packed: &[Option<Packed<R>>],
     bins: &TileBins,
     t: usize,
+    split: bool,
 ) -> TileOut<R> {
     const { assert!(W == 8 || W == 16) };
     let [x0, x1, y0, y1] = bins.pixel_rect(t);
@@ -117,9 +143,19 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
     let mut half_done = [[0u32; 2]; TILE];
     // Image pixels per half (fewer at the right edge of the image, 0 beyond it).
     let half_len: [u32; 2] = std::array::from_fn(|h| (x1 - x0).saturating_sub(8 * h).min(8) as u32);
+    // Bit 2 r + h: half h of tile row r has no pixel left to blend (all done, or none in the
+    // image), in the layout of `Entry::halves`.
+    let mut done_bits = (0..TILE).fold(0u32, |b, r| {
+        let empty = [half_len[0] == 0, half_len[1] == 0];
+        b | (empty[0] as u32) << (2 * r) | (empty[1] as u32) << (2 * r + 1)
+    });
     let half = R::c(0.5);
     // Pixel-centre x coordinates of the tile's columns.
     let xs: [R; TILE] = std::array::from_fn(|k| R::c((x0 + k) as f64) + half);
+    // With 16 lanes and `split`, rows with one half to visit run 8 lanes (where 512-bit
+    // operations run as two halves they cost half as much; elsewhere a whole row costs what a
+    // half does).
+    let split = W == 16 && split;
     // The whole work list is gathered first; its prefix up to the largest n_contrib is kept for
     // the backward.
     let entries = tile_entries(packed, bins, t);
@@ -131,17 +167,13 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
         stats.entries += 1;
         let (k0, k1) = (e.x0 as usize - x0, e.x1 as usize - x0);
         let colm: [u32; TILE] = std::array::from_fn(|k| mask(k0 <= k && k < k1));
-        // The halves row `r` (tile-local) visits: those meeting the chord and not all done.
-        let go = |r: usize, hd: &[[u32; 2]; TILE]| -> [bool; 2] {
-            let h = e.halves >> (2 * r);
-            [
-                h & 1 != 0 && hd[r][0] != half_len[0],
-                h & 2 != 0 && hd[r][1] != half_len[1],
-            ]
-        };
-        let (r0, r1) = (e.y0 as usize - y0, e.y1 as usize - y0);
-        // The 8 lanes of half `h` of tile row `r`. (A macro: a closure would hold the
-        // state it updates borrowed across the loop.)
+        // The halves this entry visits: those meeting its chord with a pixel left.
+        let todo = e.halves & !done_bits;
+        // Its rows: bit 2 r set when row r has a half to visit.
+        let rows = (todo | todo >> 1) & 0x5555_5555;
+        stats.rows += rows.count_ones() as u64;
+        // The 8 lanes of half `h` of tile row `r`, then whether that half is done. (A macro:
+        // a closure would hold the state it updates borrowed across the loop.)
         macro_rules! half_row {
             ($r:expr, $h:expr) => {{
                 let (r, h) = ($r, $h);
@@ -155,36 +187,53 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
                     let nd: u32 = stops.iter().sum();
                     n_done += nd;
                     half_done[r][h] += nd;
+                    if half_done[r][h] == half_len[h] {
+                        done_bits |= 1 << (2 * r + h);
+                    }
                 }
             }};
         }
+        // The visits run over the set bits of `todo` or `rows`: no branch per row or half
+        // (only the loop's own), which measured 7-9 % faster than testing each row.
         if W == 8 {
-            for r in r0..r1 {
-                let g = go(r, &half_done);
-                if !(g[0] || g[1]) {
-                    continue;
-                }
-                stats.rows += 1;
-                for (h, &gh) in g.iter().enumerate() {
-                    if gh {
-                        half_row!(r, h);
-                    }
-                }
+            let mut bits = todo;
+            while bits != 0 {
+                let b = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                half_row!(b / 2, b % 2);
             }
-        } else {
-            for r in r0..r1 {
-                let g = go(r, &half_done);
-                if !(g[0] || g[1]) {
-                    continue;
-                }
-                stats.rows += 1;
-                if !(g[0] && g[1]) {
-                    // One half to visit: 8 lanes (half the work of 16 where the CPU splits
-                    // 512-bit operations in two, as AMD Zen 4 does), the same bits.
-                    half_row!(r, g[1] as usize);
+        } else if split {
+            let mut bits = rows;
+            while bits != 0 {
+                let r = bits.trailing_zeros() as usize / 2;
+                bits &= bits - 1;
+                let g = todo >> (2 * r) & 3;
+                if g != 3 {
+                    // One half to visit: 8 lanes.
+                    half_row!(r, (g >> 1) as usize);
                     continue;
                 }
                 stats.lanes += TILE as u64;
+                let act: [u32; TILE] = std::array::from_fn(|k| colm[k]);
+                let dy = [R::c((y0 + r) as f64) + half - e.my; TILE];
+                let stops = blend_lanes(e, tag, &xs, &dy, &act, &mut st, r * TILE);
+                count_stops(
+                    &stops,
+                    r,
+                    &half_len,
+                    &mut half_done,
+                    &mut n_done,
+                    &mut done_bits,
+                );
+            }
+        } else {
+            let mut bits = rows;
+            while bits != 0 {
+                let r = bits.trailing_zeros() as usize / 2;
+                bits &= bits - 1;
+                stats.lanes += TILE as u64;
+                // The lanes of the halves the chord meets (a done half's lanes are masked by
+                // `done`).
                 let hv = [
                     e.halves >> (2 * r) & 1 != 0,
                     e.halves >> (2 * r + 1) & 1 != 0,
@@ -192,14 +241,14 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
                 let act: [u32; TILE] = std::array::from_fn(|k| colm[k] & mask(hv[k / 8]));
                 let dy = [R::c((y0 + r) as f64) + half - e.my; TILE];
                 let stops = blend_lanes(e, tag, &xs, &dy, &act, &mut st, r * TILE);
-                // Pixels stop rarely (once each): count them only when one did.
-                if stops.iter().fold(0, |a, &s| a | s) != 0 {
-                    for (h, s) in stops.chunks_exact(8).enumerate() {
-                        let nd: u32 = s.iter().sum();
-                        n_done += nd;
-                        half_done[r][h] += nd;
-                    }
-                }
+                count_stops(
+                    &stops,
+                    r,
+                    &half_len,
+                    &mut half_done,
+                    &mut n_done,
+                    &mut done_bits,
+                );
             }
         }
     }
