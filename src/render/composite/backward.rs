@@ -90,19 +90,27 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
             *l = [zero; TILE];
         }
         // The lane vectors this entry visits, per column block `v` (rows ascending): rows with
-        // a pixel where the entry may still blend (`j < n_contrib`) and a half the chord meets.
+        // a pixel where the entry may still blend (`j < n_contrib`) and a half the chord meets
+        // (bit 2 r of `live` and of the halves word), gathered from the set bits without a
+        // branch per row.
+        let live = (0..TILE).fold(0u32, |b, r| b | ((ju < row_last[r]) as u32) << (2 * r));
+        let (r0, r1) = (e.y0 as usize - y0, e.y1 as usize - y0);
+        let in_box = (0..TILE).fold(0u32, |b, r| b | ((r0 <= r && r < r1) as u32) << (2 * r));
+        stats.rows += (live & in_box).count_ones() as u64;
         let mut steps = [[0u8; TILE]; 2];
         let mut n_steps = [0usize; 2];
-        for row in e.y0 as usize..e.y1 as usize {
-            if ju >= row_last[row - y0] {
-                continue;
-            }
-            stats.rows += 1;
-            for v in 0..TILE / W {
-                if vector_mask::<W>(e.halves, row - y0, v * W) != 0 {
-                    steps[v][n_steps[v]] = (row - y0) as u8;
-                    n_steps[v] += 1;
-                }
+        for v in 0..TILE / W {
+            let h = e.halves >> (v * W / 8);
+            let meets = if W == 16 {
+                (h | h >> 1) & 0x5555_5555
+            } else {
+                h & 0x5555_5555
+            };
+            let mut bits = meets & live;
+            while bits != 0 {
+                steps[v][n_steps[v]] = (bits.trailing_zeros() / 2) as u8;
+                n_steps[v] += 1;
+                bits &= bits - 1;
             }
         }
         // Two rows per step (independent dependency chains side by side); per column the rows
@@ -173,18 +181,6 @@ struct Pixels<R> {
     behind: [R; TP],
     g: [R; TP],
     last: [u32; TP],
-}
-
-/// Lanes of the `W` columns from `c0` of tile row `r` that a chord-tested half may hold
-/// (all-ones per lane).
-#[inline(always)]
-fn vector_mask<const W: usize>(halves: u32, r: usize, c0: usize) -> u32 {
-    let h = (halves >> (2 * r)) & 3;
-    if W == 16 {
-        h
-    } else {
-        h >> (c0 / 8) & 1
-    }
 }
 
 /// One pixel's part of the backward of one entry: whether it blended there (`valid`) and
