@@ -320,7 +320,7 @@ fn rows_step<R: Real, const W: usize>(
 ) -> u32 {
     let xh: &[R; W] = fixed(xs, c0);
     let mut a = Row::<R, W>::load(px, e, colm, y0, rows[0], c0);
-    let mut acc: [[R; W]; 7] = [R::zero(); 7].map(|_| [R::zero(); W]);
+    let mut acc = [[R::zero(); W]; 7];
     for m in 0..7 {
         acc[m] = *fixed(&lanes[m], c0);
     }

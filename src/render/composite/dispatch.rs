@@ -12,27 +12,22 @@ use crate::image2d::Image2d;
 use crate::real::Real;
 use crate::simd::Simd;
 
-/// Which compiled tile kernel runs: the instruction set, the lane width (8 or 16 pixels) and,
-/// with 16, whether the forward runs the rows with one half to visit on 8 lanes (`split`).
+/// Which compiled tile kernel runs: the instruction set and the lane width (8 or 16 pixels).
 /// Every combination gives the same bits; [`Kernel::of`] picks the natural width of a set.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct Kernel {
     pub simd: Simd,
     pub wide: bool,
-    pub split: bool,
 }
 
 impl Kernel {
     /// The kernel of `simd` (or of the widest supported narrower set): 16 lanes with AVX-512,
-    /// 8 otherwise; half rows on 8 lanes where the CPU runs 512-bit operations as two halves
-    /// ([`crate::simd::splits_512_bit`]: there 8 lanes cost half as much as 16).
+    /// 8 otherwise.
     pub fn of(simd: Simd) -> Kernel {
         let simd = simd.or_narrower();
-        let wide = simd == Simd::Avx512;
         Kernel {
             simd,
-            wide,
-            split: wide && crate::simd::splits_512_bit(),
+            wide: simd == Simd::Avx512,
         }
     }
 }
@@ -47,18 +42,18 @@ pub(super) fn forward_tile<R: Real>(
     match k.simd {
         // SAFETY: the CPU supports the instruction set (checked by `supported`).
         Simd::Avx512 if Simd::Avx512.supported() => {
-            return unsafe { forward_tile_avx512::<R, 16>(s, bins, t, k.split) };
+            return unsafe { forward_tile_avx512::<R, 16>(s, bins, t) };
         }
         Simd::Avx2 if k.wide && Simd::Avx2.supported() => {
-            return unsafe { forward_tile_avx2::<R, 16>(s, bins, t, k.split) };
+            return unsafe { forward_tile_avx2::<R, 16>(s, bins, t) };
         }
         Simd::Avx2 if Simd::Avx2.supported() => {
-            return unsafe { forward_tile_avx2::<R, 8>(s, bins, t, false) };
+            return unsafe { forward_tile_avx2::<R, 8>(s, bins, t) };
         }
         _ => {}
     }
     let _ = k;
-    super::forward::forward_tile::<R, 8>(s, bins, t, false)
+    super::forward::forward_tile::<R, 8>(s, bins, t)
 }
 
 crate::simd::wide_kernels! {
@@ -66,10 +61,9 @@ crate::simd::wide_kernels! {
         s: &[Option<Packed<R>>],
         bins: &TileBins,
         t: usize,
-        split: bool,
     ) -> TileOut<R>;
-    forward_tile_avx2 => { super::forward::forward_tile::<R, W>(s, bins, t, split) }
-    forward_tile_avx512 => { super::forward::forward_tile::<R, W>(s, bins, t, split) }
+    forward_tile_avx2 => { super::forward::forward_tile::<R, W>(s, bins, t) }
+    forward_tile_avx512 => { super::forward::forward_tile::<R, W>(s, bins, t) }
 }
 
 pub(super) fn backward_tile<R: Real>(

@@ -113,7 +113,6 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
     packed: &[Option<Packed<R>>],
     bins: &TileBins,
     t: usize,
-    split: bool,
 ) -> TileOut<R> {
     const { assert!(W == 8 || W == 16) };
     let [x0, x1, y0, y1] = bins.pixel_rect(t);
@@ -152,10 +151,6 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
     let half = R::c(0.5);
     // Pixel-centre x coordinates of the tile's columns.
     let xs: [R; TILE] = std::array::from_fn(|k| R::c((x0 + k) as f64) + half);
-    // With 16 lanes and `split`, rows with one half to visit run 8 lanes (where 512-bit
-    // operations run as two halves they cost half as much; elsewhere a whole row costs what a
-    // half does).
-    let split = W == 16 && split;
     // The whole work list is gathered first; its prefix up to the largest n_contrib is kept for
     // the backward.
     let entries = tile_entries(packed, bins, t);
@@ -194,7 +189,8 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
             }};
         }
         // The visits run over the set bits of `todo` or `rows`: no branch per row or half
-        // (only the loop's own), which measured 7-9 % faster than testing each row.
+        // but the loop's own and, with 16 lanes, the one between a half and a whole row
+        // (7-9 % faster than testing each row, docs/measurements.md).
         if W == 8 {
             let mut bits = todo;
             while bits != 0 {
@@ -202,45 +198,22 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
                 bits &= bits - 1;
                 half_row!(b / 2, b % 2);
             }
-        } else if split {
+        } else {
             let mut bits = rows;
             while bits != 0 {
                 let r = bits.trailing_zeros() as usize / 2;
                 bits &= bits - 1;
                 let g = todo >> (2 * r) & 3;
                 if g != 3 {
-                    // One half to visit: 8 lanes.
+                    // One half to visit: 8 lanes (half the work of 16 where the CPU splits
+                    // 512-bit operations in two, as AMD Zen 4 does; faster on AMD Zen 5 too,
+                    // where a 16-lane step costs more than an 8-lane one on a real scene).
                     half_row!(r, (g >> 1) as usize);
                     continue;
                 }
                 stats.lanes += TILE as u64;
-                let act: [u32; TILE] = std::array::from_fn(|k| colm[k]);
                 let dy = [R::c((y0 + r) as f64) + half - e.my; TILE];
-                let stops = blend_lanes(e, tag, &xs, &dy, &act, &mut st, r * TILE);
-                count_stops(
-                    &stops,
-                    r,
-                    &half_len,
-                    &mut half_done,
-                    &mut n_done,
-                    &mut done_bits,
-                );
-            }
-        } else {
-            let mut bits = rows;
-            while bits != 0 {
-                let r = bits.trailing_zeros() as usize / 2;
-                bits &= bits - 1;
-                stats.lanes += TILE as u64;
-                // The lanes of the halves the chord meets (a done half's lanes are masked by
-                // `done`).
-                let hv = [
-                    e.halves >> (2 * r) & 1 != 0,
-                    e.halves >> (2 * r + 1) & 1 != 0,
-                ];
-                let act: [u32; TILE] = std::array::from_fn(|k| colm[k] & mask(hv[k / 8]));
-                let dy = [R::c((y0 + r) as f64) + half - e.my; TILE];
-                let stops = blend_lanes(e, tag, &xs, &dy, &act, &mut st, r * TILE);
+                let stops = blend_lanes(e, tag, &xs, &dy, &colm, &mut st, r * TILE);
                 count_stops(
                     &stops,
                     r,

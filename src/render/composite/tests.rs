@@ -261,22 +261,24 @@ fn backward_with_saved_work_lists_equals_rebuilt_lists_bitwise() {
     }
 }
 
-/// Every compiled kernel this CPU can run: (instruction set, 16 lanes?, half rows on 8 lanes?).
+/// Every compiled kernel this CPU can run: (instruction set, 16 lanes?).
 fn kernels() -> Vec<Kernel> {
     let mut k = vec![Kernel {
         simd: Simd::Scalar,
         wide: false,
-        split: false,
     }];
-    let kernel = |simd, wide, split| Kernel { simd, wide, split };
     if Simd::Avx2.supported() {
-        k.push(kernel(Simd::Avx2, false, false));
-        k.push(kernel(Simd::Avx2, true, false));
-        k.push(kernel(Simd::Avx2, true, true));
+        k.push(Kernel {
+            simd: Simd::Avx2,
+            wide: false,
+        });
+        k.push(Kernel {
+            simd: Simd::Avx2,
+            wide: true,
+        });
     }
     if Simd::Avx512.supported() {
-        k.push(kernel(Simd::Avx512, true, false));
-        k.push(kernel(Simd::Avx512, true, true));
+        k.push(Kernel::of(Simd::Avx512));
     }
     k
 }
@@ -311,10 +313,7 @@ fn run_kernel<R: Real>(k: Kernel, s: &Splats<R>, w: usize, h: usize, d: &Image2d
 #[test]
 fn every_simd_path_gives_the_same_bits() {
     let paths = kernels();
-    println!(
-        "kernels run: {paths:?} (of scalar, avx2 x 8/16 lanes, avx512 x 16 lanes; 16 lanes with \
-         and without half rows on 8)"
-    );
+    println!("kernels run: {paths:?} (of scalar, avx2 x 8/16 lanes, avx512 x 16 lanes)");
     // Sizes with partial tiles at the right and bottom edges, dense and sparse scenes.
     for (n, w, h, seed) in [(400, 64, 48, 21), (900, 53, 37, 22), (60, 37, 29, 23)] {
         let s = random_splats(n, w, h, seed);
