@@ -190,7 +190,7 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
         }
         // The visits run over the set bits of `todo` or `rows`: no branch per row or half
         // but the loop's own and, with 16 lanes, the one between a half and a whole row
-        // (7-9 % faster than testing each row, docs/measurements.md).
+        // (about 10 % faster than testing each row, docs/measurements.md).
         if W == 8 {
             let mut bits = todo;
             while bits != 0 {
