@@ -378,8 +378,9 @@ fn trilinear_band(
     let wide = simd == Simd::Avx512 && march == MarchLanes::Sixteen;
     let (tile_rows, tile_cols) = if wide { LANE_TILE_16 } else { LANE_TILE };
     let mut plans = Vec::with_capacity(tile_rows * tile_cols);
-    let mut runs = Vec::with_capacity(tile_rows * tile_cols);
     let mut inner = [0.0f32; lanes::MAXW];
+    let (mut before, mut after) = ([0.0f32; lanes::MAXW], [0.0f32; lanes::MAXW]);
+    let mut runs = Vec::with_capacity(lanes::MAXW);
     for r0 in (0..rows).step_by(tile_rows) {
         for c0 in (0..w).step_by(tile_cols) {
             plans.clear();
@@ -391,10 +392,19 @@ fn trilinear_band(
             }
             // The samples before the inner loops, from 0.
             let mut sums = [0.0f32; lanes::MAXW];
-            padded_runs(simd, wide, grid, &plans, |p| p.before_run, &sums, &mut runs);
+            padded_runs(
+                simd,
+                wide,
+                grid,
+                &plans,
+                |p| p.before_run,
+                &sums,
+                &mut runs,
+                &mut before,
+            );
             for (k, (_, p)) in plans.iter_mut().enumerate() {
                 p.before = if lane_run(p.before_run) {
-                    runs[k].acc
+                    before[k]
                 } else {
                     trilinear::sum_padded(grid, p.q0, p.dq, p.before_run, 0.0)
                 };
@@ -437,10 +447,19 @@ fn trilinear_band(
                 };
                 sums[k] = trilinear::finish_start(p, inner);
             }
-            padded_runs(simd, wide, grid, &plans, |p| p.after, &sums, &mut runs);
+            padded_runs(
+                simd,
+                wide,
+                grid,
+                &plans,
+                |p| p.after,
+                &sums,
+                &mut runs,
+                &mut after,
+            );
             for (k, (slot, p)) in plans.iter().enumerate() {
                 let sum = if lane_run(p.after) {
-                    runs[k].acc
+                    after[k]
                 } else {
                     trilinear::sum_padded(grid, p.q0, p.dq, p.after, sums[k])
                 };
@@ -459,9 +478,11 @@ fn lane_run((first, last): (i64, i64)) -> bool {
     first > last || (first.abs() < 1 << 52 && last.abs() < 1 << 52 && last - first < (1 << 31) - 1)
 }
 
-/// `runs[k].acc` = `init[k]` plus the zero-padded samples `run(plan k)` of the tile's plans,
-/// summed on the lanes of `simd` (an empty run for the runs that [`lane_run`] leaves per ray):
-/// with `wide` (16 march lanes) on AVX-512's 8 lanes, else on AVX2's 4.
+/// `out[k]` = `init[k]` plus the zero-padded samples `run(plan k)` of the tile's plans, for
+/// the runs that [`lane_run`] gives to the lanes of `simd` (`init[k]` for the others, which
+/// are summed per ray): with `wide` (16 march lanes) on AVX-512's 8 lanes, else on AVX2's 4.
+/// `runs` is scratch space.
+#[allow(clippy::too_many_arguments)]
 fn padded_runs(
     simd: Simd,
     wide: bool,
@@ -469,27 +490,34 @@ fn padded_runs(
     plans: &[(usize, trilinear::Plan<f32>)],
     run: impl Fn(&trilinear::Plan<f32>) -> (i64, i64),
     init: &[f32],
-    runs: &mut Vec<trilinear::Run>,
+    runs: &mut Vec<(usize, trilinear::Run)>,
+    out: &mut [f32],
 ) {
+    let n = plans.len();
+    out[..n].copy_from_slice(&init[..n]);
+    // The runs with samples (an empty run adds nothing).
     runs.clear();
-    runs.extend(plans.iter().zip(init).map(|((_, p), &acc)| {
-        let r = run(p);
-        let (first, last) = if lane_run(r) { r } else { (1, 0) };
-        trilinear::Run {
-            q0: p.q0,
-            dq: p.dq,
-            first,
-            last,
-            acc,
-        }
+    runs.extend(plans.iter().enumerate().filter_map(|(k, (_, p))| {
+        let (first, last) = run(p);
+        (lane_run((first, last)) && first <= last).then_some((
+            k,
+            trilinear::Run {
+                q0: p.q0,
+                dq: p.dq,
+                first,
+                last,
+                acc: init[k],
+            },
+        ))
     }));
     #[cfg(target_arch = "x86_64")]
     // SAFETY: `simd` is supported (`or_narrower`); the grid has fewer than 2^31 voxels
-    // (`lanes_f32`); every run has fewer than 2^31 samples of index below 2^52 (`lane_run`).
+    // (`lanes_f32`); every run has from 1 to 2^31 - 1 samples of index below 2^52
+    // (`lane_run`); every slot `k` is in `out` (one per plan).
     unsafe {
         match simd {
-            Simd::Avx512 if wide => padded_lanes::sum_runs_avx512(grid.data, grid.n, runs),
-            Simd::Avx512 | Simd::Avx2 => padded_lanes::sum_runs_avx2(grid.data, grid.n, runs),
+            Simd::Avx512 if wide => padded_lanes::sum_runs_avx512(grid.data, grid.n, runs, out),
+            Simd::Avx512 | Simd::Avx2 => padded_lanes::sum_runs_avx2(grid.data, grid.n, runs, out),
             Simd::Scalar => unreachable!("the scalar path runs the per-ray loop"),
         }
     }
@@ -525,7 +553,7 @@ const TILE: usize = 32;
 const LANE_TILE: (usize, usize) = (4, 2);
 /// The same for 16 lanes ([`MarchLanes::Sixteen`]). On AMD Zen 5 (`bench drr`, cpu/thr, AP /
 /// lateral): 8 x 2 0.039 / 0.050 s, 4 x 4 0.035 / 0.051 s (but 10-20 % slower than 8 lanes at
-/// 30 and 135 deg, where 8 x 2 is within 5 %), 2 x 8 0.038 / 0.063 s, 16 x 1 1.5x slower at 0,
+/// 30 and 135 deg, where 8 x 2 is within 5 %), 2 x 8 0.038 / 0.063 s, 16 x 1 1.4-1.8x slower at 0,
 /// 30 and 90 deg. Tiles stack rows of the detector (v, along z in these views), whose neighbouring
 /// rays share z planes in the lateral view.
 const LANE_TILE_16: (usize, usize) = (8, 2);

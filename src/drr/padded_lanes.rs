@@ -18,9 +18,10 @@
 //! lane's sum. The eight values are read with gathers (on AMD Zen 4 a gather is slow, but here
 //! it replaces eight scalar reads, their index extraction and their inserts).
 
+use super::lanes::{hand_over, start_lanes, RayLanes};
 use super::trilinear::Run;
 
-/// The lanes' runs: positions, sample index (f64), samples left, sum, and which run.
+/// The lanes' runs: positions, sample index (f64), samples left, sum, and where it goes.
 struct RunLanes<const W: usize> {
     q0: [[f64; W]; 3],
     dq: [[f64; W]; 3],
@@ -28,80 +29,52 @@ struct RunLanes<const W: usize> {
     left: [i32; W],
     acc: [f32; W],
     slot: [usize; W],
-    /// The next run to take.
-    next: usize,
 }
 
 impl<const W: usize> RunLanes<W> {
-    /// Every lane started on the first runs that have samples; and the lanes started (bits).
-    #[inline(always)]
-    fn start(runs: &[Run]) -> (Self, u32) {
-        let mut s = RunLanes {
+    fn new() -> Self {
+        RunLanes {
             q0: [[0.0; W]; 3],
             dq: [[0.0; W]; 3],
             fi: [0.0; W],
             left: [0; W],
             acc: [0.0; W],
             slot: [0; W],
-            next: 0,
-        };
-        let mut active = 0;
-        for k in 0..W {
-            if s.take(runs, k) {
-                active |= 1 << k;
-            }
         }
-        (s, active)
-    }
-
-    /// Start lane `k` on the next run that has samples; whether there was one.
-    #[inline(always)]
-    fn take(&mut self, runs: &[Run], k: usize) -> bool {
-        while self.next < runs.len() {
-            let r = runs[self.next];
-            self.next += 1;
-            if r.first <= r.last {
-                for a in 0..3 {
-                    self.q0[a][k] = r.q0[a];
-                    self.dq[a][k] = r.dq[a];
-                }
-                self.fi[k] = r.first as f64;
-                self.left[k] = (r.last - r.first + 1) as i32;
-                self.acc[k] = r.acc;
-                self.slot[k] = self.next - 1;
-                return true;
-            }
-        }
-        false
-    }
-
-    /// The lanes `done` (bits) write their sums to their runs and take the next ones; returns
-    /// the lanes of `active` still running or restarted.
-    #[inline(always)]
-    fn hand_over(&mut self, runs: &mut [Run], mut active: u32, done: u32) -> u32 {
-        let mut bits = done;
-        while bits != 0 {
-            let k = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            runs[self.slot[k]].acc = self.acc[k];
-            active &= !(1 << k);
-            if self.take(runs, k) {
-                active |= 1 << k;
-            }
-        }
-        active
     }
 }
 
-/// Add each run's samples to its `acc`, in order (4 lanes).
+impl<const W: usize> RayLanes for RunLanes<W> {
+    type Ray = Run;
+
+    /// (The run has samples: `first <= last`.) An idle lane needs no parking: its count of
+    /// samples left stays below 1, so it neither adds nor ends.
+    fn start(&mut self, k: usize, slot: usize, r: Run) {
+        for a in 0..3 {
+            self.q0[a][k] = r.q0[a];
+            self.dq[a][k] = r.dq[a];
+        }
+        self.fi[k] = r.first as f64;
+        self.left[k] = (r.last - r.first + 1) as i32;
+        self.acc[k] = r.acc;
+        self.slot[k] = slot;
+    }
+
+    fn result(&self, k: usize) -> (usize, f32) {
+        (self.slot[k], self.acc[k])
+    }
+}
+
+/// Each run of `runs` (`(slot, run)`) added to its `acc`, its samples in order, into
+/// `out[slot]` (4 lanes).
 ///
 /// # Safety
 /// The CPU supports AVX2 (the caller is compiled with it); `data` is the `n`-voxel grid (x
-/// fastest) with `n[0] n[1] n[2] < 2^31` and `n[a] >= 1`; every run has fewer than 2^31
-/// samples, all of index below 2^53 in magnitude.
+/// fastest) with `n[0] n[1] n[2] < 2^31` and `n[a] >= 1`; every run has from 1 to 2^31 - 1
+/// samples, all of index below 2^53 in magnitude; every slot is in `out`.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn sum_runs(data: &[f32], n: [usize; 3], runs: &mut [Run]) {
+unsafe fn sum_runs(data: &[f32], n: [usize; 3], runs: &[(usize, Run)], out: &mut [f32]) {
     use std::arch::x86_64::*;
     // SAFETY: the caller's contract (AVX2); every read index is clamped into the grid.
     unsafe {
@@ -115,7 +88,9 @@ unsafe fn sum_runs(data: &[f32], n: [usize; 3], runs: &mut [Run]) {
         );
         let (minus1, one_d) = (_mm256_set1_pd(-1.0), _mm256_set1_pd(1.0));
         let (zero_i, one_i, one_f) = (_mm_setzero_si128(), _mm_set1_epi32(1), _mm_set1_ps(1.0));
-        let (mut s, mut active) = RunLanes::<W>::start(runs);
+        let mut s = RunLanes::<W>::new();
+        let runs = &mut runs.iter().copied();
+        let mut active = start_lanes(&mut s, W, runs);
         while active != 0 {
             let load_d = |v: &[f64; W]| _mm256_loadu_pd(v.as_ptr());
             let vq0 = [load_d(&s.q0[0]), load_d(&s.q0[1]), load_d(&s.q0[2])];
@@ -185,7 +160,7 @@ unsafe fn sum_runs(data: &[f32], n: [usize; 3], runs: &mut [Run]) {
             _mm256_storeu_pd(s.fi.as_mut_ptr(), vfi);
             _mm_storeu_si128(s.left.as_mut_ptr().cast(), vleft);
             _mm_storeu_ps(s.acc.as_mut_ptr(), vacc);
-            active = s.hand_over(runs, active, done);
+            active = hand_over(&mut s, active, done, runs, out);
         }
     }
 }
@@ -197,7 +172,7 @@ unsafe fn sum_runs(data: &[f32], n: [usize; 3], runs: &mut [Run]) {
 /// As [`sum_runs`], with AVX-512 F/DQ/VL.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-unsafe fn sum_runs_8(data: &[f32], n: [usize; 3], runs: &mut [Run]) {
+unsafe fn sum_runs_8(data: &[f32], n: [usize; 3], runs: &[(usize, Run)], out: &mut [f32]) {
     use std::arch::x86_64::*;
     // SAFETY: the caller's contract (AVX-512); every read index is clamped into the grid.
     unsafe {
@@ -215,7 +190,9 @@ unsafe fn sum_runs_8(data: &[f32], n: [usize; 3], runs: &mut [Run]) {
             _mm256_set1_epi32(1),
             _mm256_set1_ps(1.0),
         );
-        let (mut s, mut active) = RunLanes::<W>::start(runs);
+        let mut s = RunLanes::<W>::new();
+        let runs = &mut runs.iter().copied();
+        let mut active = start_lanes(&mut s, W, runs);
         while active != 0 {
             let load_d = |v: &[f64; W]| _mm512_loadu_pd(v.as_ptr());
             let vq0 = [load_d(&s.q0[0]), load_d(&s.q0[1]), load_d(&s.q0[2])];
@@ -281,7 +258,7 @@ unsafe fn sum_runs_8(data: &[f32], n: [usize; 3], runs: &mut [Run]) {
             _mm512_storeu_pd(s.fi.as_mut_ptr(), vfi);
             _mm256_storeu_si256(s.left.as_mut_ptr().cast(), vleft);
             _mm256_storeu_ps(s.acc.as_mut_ptr(), vacc);
-            active = s.hand_over(runs, active, done);
+            active = hand_over(&mut s, active, done, runs, out);
         }
     }
 }
@@ -292,10 +269,10 @@ crate::simd::wide_kernels! {
     ///
     /// # Safety
     /// As [`sum_runs`], on a CPU with the instruction set.
-    pub(crate) unsafe fn [](data: &[f32], n: [usize; 3], runs: &mut [Run]);
+    pub(crate) unsafe fn [](data: &[f32], n: [usize; 3], runs: &[(usize, Run)], out: &mut [f32]);
     // SAFETY (both): as this function.
-    sum_runs_avx2 => { unsafe { sum_runs(data, n, runs) } }
-    sum_runs_avx512 => { unsafe { sum_runs_8(data, n, runs) } }
+    sum_runs_avx2 => { unsafe { sum_runs(data, n, runs, out) } }
+    sum_runs_avx512 => { unsafe { sum_runs_8(data, n, runs, out) } }
 }
 
 #[cfg(all(test, target_arch = "x86_64"))]
@@ -334,15 +311,23 @@ mod tests {
                 if !simd.supported() {
                     continue;
                 }
-                let mut got = runs.clone();
-                // SAFETY: the path is supported; the grid is small; the runs are short.
+                // The lanes take the runs that have samples; the empty ones keep their sum.
+                let mut got: Vec<f32> = runs.iter().map(|r| r.acc).collect();
+                let lane_runs: Vec<(usize, Run)> = runs
+                    .iter()
+                    .copied()
+                    .enumerate()
+                    .filter(|(_, r)| r.first <= r.last)
+                    .collect();
+                // SAFETY: the path is supported; the grid is small; the runs are short and not
+                // empty; the slots index `got`.
                 unsafe {
                     match simd {
-                        Simd::Avx512 => super::sum_runs_avx512(&data, n, &mut got),
-                        _ => super::sum_runs_avx2(&data, n, &mut got),
+                        Simd::Avx512 => super::sum_runs_avx512(&data, n, &lane_runs, &mut got),
+                        _ => super::sum_runs_avx2(&data, n, &lane_runs, &mut got),
                     }
                 }
-                let got: Vec<u32> = got.iter().map(|r| r.acc.to_bits()).collect();
+                let got: Vec<u32> = got.iter().map(|v| v.to_bits()).collect();
                 assert_eq!(got, want, "case {case} {simd:?}");
             }
         }

@@ -95,7 +95,7 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
         // branch per row.
         let live = (0..TILE).fold(0u32, |b, r| b | ((ju < row_last[r]) as u32) << (2 * r));
         let (r0, r1) = (e.y0 as usize - y0, e.y1 as usize - y0);
-        let in_box = (0..TILE).fold(0u32, |b, r| b | ((r0 <= r && r < r1) as u32) << (2 * r));
+        let in_box = ((1u64 << (2 * r1)) - (1u64 << (2 * r0))) as u32 & 0x5555_5555;
         stats.rows += (live & in_box).count_ones() as u64;
         let mut steps = [[0u8; TILE]; 2];
         let mut n_steps = [0usize; 2];
