@@ -30,10 +30,17 @@
 //! Work limits that do not change any bit of the result: for each (tile, splat) the pixels
 //! evaluated are restricted to the bounding box of the ellipse o G >= (1/255) e^-0.001 widened
 //! by one pixel (outside it alpha < 1/255, so those pixels would be skipped anyway); splats with
-//! o < (1/255) e^-0.001 are dropped; a tile stops when all its pixels are done; the forward
-//! skips a row or an 8-column half whose pixels are all done (every lane would fail the `done`
-//! test), the backward a row where no pixel has n_contrib > j (every lane would fail
+//! o < (1/255) e^-0.001 are dropped; a tile stops when all its pixels are done (and the
+//! forward reads no splat of its list behind that point); the forward skips a row or an
+//! 8-column half whose pixels are all done (every lane would fail the `done` test), the backward
+//! an 8-column half of a row where no pixel has n_contrib > j (every lane would fail
 //! `j < n_contrib`).
+//!
+//! Summation order of an entry's gradient record (the backward; every path, width and thread
+//! count): per tile column, the pixels of the even tile rows are summed top to bottom, those of
+//! the odd rows likewise, then even + odd; then the columns left to right. (Rows in pairs let a
+//! 16-lane vector hold one 8-column half of two rows, so that an entry meeting one half of the
+//! tile does not take whole-row vectors.)
 //!
 //! Parallelism: rayon over tiles. Each tile is computed by one task in a fixed order; the
 //! per-tile gradient records (one per list entry) are reduced sequentially in tile order (by
@@ -51,6 +58,7 @@
 //!
 //! [`naive_forward`] is the per-pixel reference the tests compare with, bit for bit.
 
+use super::lanes::mask;
 use crate::real::Real;
 
 use super::tiles::{TileBins, TILE};
@@ -76,6 +84,65 @@ pub const T_MIN: f64 = 1e-4;
 
 /// Pixels per tile.
 const TP: usize = TILE * TILE;
+
+/// `T` at a 64-byte boundary: the kernels' per-pixel arrays, so that a 16-lane f32 vector at a
+/// multiple of 16 pixels is one cache line (a vector across two lines costs two accesses, and
+/// the stack's alignment beyond 16 bytes would otherwise depend on the caller).
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+struct Lines<T>(T);
+
+/// Tile-local index of the pixel in tile row `r`, column `c` in the kernels' per-pixel state:
+/// the tile's rows in pairs (2 m, 2 m + 1), each pair's 8-column half `h` as 16 consecutive
+/// pixels, the even row's 8 then the odd row's (32 m + 16 h + 8 (r % 2) + c % 8). A lane vector
+/// of 16 then holds one half of two rows, so that rows where an entry meets one half only
+/// share vectors.
+#[inline(always)]
+fn slot_index(r: usize, c: usize) -> usize {
+    32 * (r / 2) + 16 * (c / 8) + 8 * (r % 2) + c % 8
+}
+
+/// Pixel-centre coordinates of a tile in the lane order of [`slot_index`]: per half `h`, the
+/// x of its 8 columns twice (`xs[h]`, for either row of a pair); per row pair `m`, the y of the
+/// even row 8 times, then of the odd row (`ys[m]`).
+struct SlotLanes<R> {
+    xs: [[R; 16]; 2],
+    ys: [[R; 16]; TILE / 2],
+}
+
+impl<R: Real> SlotLanes<R> {
+    /// The coordinates of the tile whose top-left pixel is (`x0`, `y0`).
+    #[inline(always)]
+    fn new(x0: usize, y0: usize) -> Self {
+        let half = R::c(0.5);
+        let mut l = SlotLanes {
+            xs: [[half; 16]; 2],
+            ys: [[half; 16]; TILE / 2],
+        };
+        for k in 0..16 {
+            for h in 0..2 {
+                l.xs[h][k] = R::c((x0 + 8 * h + k % 8) as f64) + half;
+            }
+            for m in 0..TILE / 2 {
+                l.ys[m][k] = R::c((y0 + 2 * m + k / 8) as f64) + half;
+            }
+        }
+        l
+    }
+
+    /// Lane masks of the tile columns `k0..k1` in the order of `xs`.
+    #[inline(always)]
+    fn columns(&self, k0: usize, k1: usize) -> [[u32; 16]; 2] {
+        let mut m = [[0u32; 16]; 2];
+        for (h, mh) in m.iter_mut().enumerate() {
+            for (k, v) in mh.iter_mut().enumerate() {
+                let c = 8 * h + k % 8;
+                *v = mask(k0 <= c && c < k1);
+            }
+        }
+        m
+    }
+}
 
 /// Floating-point operations (adds, multiplies, fused multiply-adds, divisions, compares and
 /// min/selects on floats; a fused multiply-add counts as one, as it takes one multiply pipe) per

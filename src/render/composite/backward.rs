@@ -13,7 +13,10 @@ use super::super::tiles::TILE;
 use super::super::SplatGrads;
 use super::dispatch::{self, Kernel};
 use super::worklist::{pack, tile_entries, Entry, Packed};
-use super::{CompositeSaved, KernelWork, Phase, Splats, ALPHA_MAX, ALPHA_MIN, TP};
+use super::{
+    slot_index, CompositeSaved, KernelWork, Lines, Phase, SlotLanes, Splats, ALPHA_MAX, ALPHA_MIN,
+    TP,
+};
 use crate::image2d::Image2d;
 use crate::par::lock;
 use crate::real::Real;
@@ -26,8 +29,11 @@ pub(super) type Rec<R> = (u32, [R; 7]);
 pub(super) type TileGrads<R> = (Vec<Rec<R>>, KernelWork);
 
 /// The backward kernel of tile `t`, `W` pixels per lane vector (see
-/// [`forward_tile`](super::forward::forward_tile); both widths give the same bits: per column, the
-/// rows are summed in the same order).
+/// [`forward_tile`](super::forward::forward_tile)). Its steps are the pixel pairs of
+/// [`slot_index`]: for one 8-column half of the tile, that half of an even tile row and of the
+/// row below it, 16 pixels (one step with 16 lanes, two with 8). Per column the backward keeps
+/// two sums, over the even and over the odd rows, each adding its rows in ascending order, and
+/// adds them (even + odd) at the end of the entry: both widths give the same bits.
 #[inline(always)]
 pub(super) fn backward_tile<R: Real, const W: usize>(
     packed: &[Option<Packed<R>>],
@@ -46,21 +52,22 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
         g: [R::zero(); TP],
         last: [0u32; TP],
     };
-    let mut max_last = 0u32;
-    // Largest n_contrib per tile row: rows with nothing left to visit are skipped.
-    let mut row_last = [0u32; TILE];
+    // Largest n_contrib per 8-column half of each tile row (index 2 r + h, the layout of
+    // `Entry::halves`): halves with nothing left to visit are skipped.
+    let mut half_last = [0u32; 2 * TILE];
     for row in y0..y1 {
         for col in x0..x1 {
-            let p = (row - y0) * TILE + col - x0;
+            let p = slot_index(row - y0, col - x0);
             let q = row * width + col;
             px.tcur[p] = saved.final_t[q];
             px.tfin[p] = saved.final_t[q];
             px.g[p] = d_image.data[q];
             px.last[p] = saved.n_contrib[q];
-            row_last[row - y0] = row_last[row - y0].max(px.last[p]);
+            let i = 2 * (row - y0) + (col - x0) / 8;
+            half_last[i] = half_last[i].max(px.last[p]);
         }
-        max_last = max_last.max(row_last[row - y0]);
     }
+    let max_last = half_last.iter().copied().max().unwrap_or(0);
     if max_last == 0 {
         return (Vec::new(), KernelWork::default());
     }
@@ -72,76 +79,94 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
         &built
     };
     let zero = R::zero();
-    let half = R::c(0.5);
     let bg = saved.background;
-    let xs: [R; TILE] = std::array::from_fn(|k| R::c((x0 + k) as f64) + half);
+    let lanes_xy = SlotLanes::<R>::new(x0, y0);
     let mut recs = Vec::with_capacity(max_last as usize);
     let mut stats = KernelWork::default();
-    // Per-column partial sums (each column sums its own rows in order), reduced over the
-    // columns in order at the end of the entry.
-    let mut lanes = [[zero; TILE]; 7];
+    // Per-column partial sums in the lane order of the steps: index 16 h + 8 p + c % 8 for
+    // column c of half h = c / 8 over the rows of parity p, each adding its rows in order;
+    // reduced at the end of the entry (even + odd per column, then over the columns in order).
     for j in (0..max_last as usize).rev() {
         let e = &entries[j];
         let ju = j as u32;
         let (k0, k1) = (e.x0 as usize - x0, e.x1 as usize - x0);
-        let colm: [u32; TILE] = std::array::from_fn(|k| mask(k0 <= k && k < k1));
         stats.entries += 1;
-        for l in lanes.iter_mut() {
-            *l = [zero; TILE];
-        }
-        // The lane vectors this entry visits, per column block `v` (rows ascending): rows with
-        // a pixel where the entry may still blend (`j < n_contrib`) and a half the chord meets
-        // (bit 2 r of `live` and of the halves word), gathered from the set bits without a
-        // branch per row.
-        let live = (0..TILE).fold(0u32, |b, r| b | ((ju < row_last[r]) as u32) << (2 * r));
-        let (r0, r1) = (e.y0 as usize - y0, e.y1 as usize - y0);
-        let in_box = ((1u64 << (2 * r1)) - (1u64 << (2 * r0))) as u32 & 0x5555_5555;
-        stats.rows += (live & in_box).count_ones() as u64;
-        let mut steps = [[0u8; TILE]; 2];
-        let mut n_steps = [0usize; 2];
-        for v in 0..TILE / W {
-            let h = e.halves >> (v * W / 8);
-            let meets = if W == 16 {
-                (h | h >> 1) & 0x5555_5555
-            } else {
-                h & 0x5555_5555
-            };
-            let mut bits = meets & live;
-            while bits != 0 {
-                steps[v][n_steps[v]] = (bits.trailing_zeros() / 2) as u8;
-                n_steps[v] += 1;
-                bits &= bits - 1;
-            }
-        }
-        // Two rows per step (independent dependency chains side by side); per column the rows
-        // still add in ascending order, so the bits are those of one row at a time.
+        let mut lanes = Lines([[zero; 2 * TILE]; 7]);
+        // The halves this entry visits: those its chord meets with a pixel where it may still
+        // blend (`j < n_contrib`), bit 2 r + h as in `Entry::halves`.
+        let live = (0..2 * TILE).fold(0u32, |b, i| b | ((ju < half_last[i]) as u32) << i);
+        let visit = e.halves & live;
+        stats.rows += ((visit | visit >> 1) & 0x5555_5555).count_ones() as u64;
+        let colm = lanes_xy.columns(k0, k1);
         let mut any = 0u32;
-        for v in 0..TILE / W {
-            let rows = &steps[v][..n_steps[v]];
-            stats.lanes += (W * rows.len()) as u64;
-            for pr in rows.chunks(2) {
-                let (r, two) = ([pr[0] as usize, pr[pr.len() - 1] as usize], pr.len() == 2);
+        for h in 0..2 {
+            // Bit 2 r: row r visits half h; bit 4 m: pair m has a row visiting it.
+            let rows = visit >> h & 0x5555_5555;
+            let pairs = (rows | rows >> 2) & 0x1111_1111;
+            let mut step = |a: Step, b: Step, two: bool| {
                 any |= rows_step::<R, W>(
                     e,
                     ju,
                     bg,
+                    &lanes_xy,
                     &colm,
-                    &xs,
-                    y0,
-                    v * W,
-                    r,
+                    h,
+                    [a, b],
                     two,
                     &mut px,
-                    &mut lanes,
+                    &mut lanes.0,
                 );
+            };
+            if W == 16 {
+                // One step per pair, two pairs per lane loop (independent dependency chains
+                // side by side, adding to the same column sums in row order).
+                stats.lanes += (16 * pairs.count_ones()) as u64;
+                let mut bits = pairs;
+                while bits != 0 {
+                    let a = Step::of(bits.trailing_zeros() as usize / 4, h, 0);
+                    bits &= bits - 1;
+                    if bits == 0 {
+                        step(a, a, false);
+                        break;
+                    }
+                    let b = Step::of(bits.trailing_zeros() as usize / 4, h, 0);
+                    bits &= bits - 1;
+                    step(a, b, true);
+                }
+            } else {
+                // One lane loop per pair, over its even and its odd row side by side (each
+                // adding to its own column sums), or over the one row that visits the half.
+                stats.lanes += (8 * rows.count_ones()) as u64;
+                let mut bits = pairs;
+                while bits != 0 {
+                    let m = bits.trailing_zeros() as usize / 4;
+                    bits &= bits - 1;
+                    let g = rows >> (4 * m) & 5;
+                    let (even, odd) = (Step::of(m, h, 0), Step::of(m, h, 1));
+                    match g {
+                        5 => step(even, odd, true),
+                        1 => step(even, even, false),
+                        _ => step(odd, odd, false),
+                    }
+                }
             }
         }
         if any > 0 {
+            // Per column: even rows + odd rows; then the columns in order. (Plain loops: the
+            // closures of `map` / `from_fn` are not always inlined into the kernel, and then
+            // not compiled for its instruction set.)
             let mut acc = [zero; 7];
-            for (a, l) in acc.iter_mut().zip(&lanes) {
-                for v in &l[k0..k1] {
-                    *a += *v;
+            for (a, l) in acc.iter_mut().zip(&lanes.0) {
+                let mut cols = [zero; TILE];
+                for (c, v) in cols.iter_mut().enumerate() {
+                    let i = 16 * (c / 8) + c % 8;
+                    *v = l[i] + l[i + 8];
                 }
+                let mut sum = zero;
+                for v in &cols[k0..k1] {
+                    sum += *v;
+                }
+                *a = sum;
             }
             recs.push((e.id, acc));
         }
@@ -149,38 +174,44 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
     (recs, stats)
 }
 
-/// Per 2-bit `halves` value of a tile row ([`Entry::halves`]), the lanes of its columns that a
-/// chord-tested half may hold.
-const HALF_MASKS: [[u32; TILE]; 4] = {
-    let mut m = [[0u32; TILE]; 4];
-    let mut b = 0;
-    while b < 4 {
-        let mut k = 0;
-        while k < TILE {
-            if (b >> (k / 8)) & 1 != 0 {
-                m[b][k] = u32::MAX;
-            }
-            k += 1;
-        }
-        b += 1;
-    }
-    m
-};
-
 /// `W` values of `v` from `o`.
 #[inline(always)]
 fn fixed<T: Copy, const W: usize, const N: usize>(v: &[T; N], o: usize) -> &[T; W] {
     v[o..o + W].try_into().unwrap()
 }
 
-/// Per-pixel state of the backward kernel, tile-local: T recovered so far, the final T, the
-/// colour behind (S), dL/dpixel and n_contrib.
+/// Per-pixel state of the backward kernel, tile-local in the order of [`slot_index`]: T
+/// recovered so far, the final T, the colour behind (S), dL/dpixel and n_contrib, each array at
+/// a 64-byte boundary (see [`Lines`](super::Lines)).
+#[repr(C, align(64))]
 struct Pixels<R> {
     tcur: [R; TP],
     tfin: [R; TP],
     behind: [R; TP],
     g: [R; TP],
     last: [u32; TP],
+}
+
+/// One lane loop's part of a step: the pixels of [`Pixels`] from `o` (`W` of them), the
+/// column sums from `acc` in the layout of the kernel's `lanes`, and the pair `m` (for the
+/// rows' y).
+#[derive(Clone, Copy)]
+struct Step {
+    o: usize,
+    acc: usize,
+    m: usize,
+}
+
+impl Step {
+    /// Pair `m`, half `h`, from the pixels of row parity `p` on (0: both rows with 16 lanes).
+    #[inline(always)]
+    fn of(m: usize, h: usize, p: usize) -> Step {
+        Step {
+            o: 32 * m + 16 * h + 8 * p,
+            acc: 16 * h + 8 * p,
+            m,
+        }
+    }
 }
 
 /// One pixel's part of the backward of one entry: whether it blended there (`valid`) and
@@ -192,14 +223,12 @@ struct Lane<R> {
     d: [R; 7],
 }
 
-/// One tile row's `W` pixels from column `c0` as the backward of one entry sees them: the
-/// row offset `dy`, the lanes (the entry's columns within the halves its chord meets),
-/// n_contrib, dL/dpixel, final T, and the T and colour-behind it updates (local copies, so
-/// that nothing aliases in the lane loop).
+/// The `W` pixels of one step as the backward of one entry sees them: the row offset `dy`
+/// per lane, n_contrib, dL/dpixel, final T, and the T and colour-behind it updates (local
+/// copies, so that nothing aliases in the lane loop).
 struct Row<R, const W: usize> {
     o: usize,
-    dy: R,
-    act: [u32; W],
+    dy: [R; W],
     last: [u32; W],
     g: [R; W],
     tfin: [R; W],
@@ -209,25 +238,16 @@ struct Row<R, const W: usize> {
 
 impl<R: Real, const W: usize> Row<R, W> {
     #[inline(always)]
-    fn load(
-        px: &Pixels<R>,
-        e: &Entry<R>,
-        colm: &[u32; TILE],
-        y0: usize,
-        r: usize,
-        c0: usize,
-    ) -> Self {
-        let o = r * TILE + c0;
-        let cm: &[u32; W] = fixed(colm, c0);
-        let hm: &[u32; W] = fixed(&HALF_MASKS[(e.halves >> (2 * r) & 3) as usize], c0);
-        let mut act = [0u32; W];
-        for k in 0..W {
-            act[k] = cm[k] & hm[k];
+    fn load(px: &Pixels<R>, e: &Entry<R>, xy: &SlotLanes<R>, s: Step) -> Self {
+        let o = s.o;
+        let ys: &[R; W] = fixed(&xy.ys[s.m], o % 16);
+        let mut dy = *ys;
+        for d in &mut dy {
+            *d -= e.my;
         }
         Row {
             o,
-            dy: R::c((y0 + r) as f64) + R::c(0.5) - e.my,
-            act,
+            dy,
             last: *fixed(&px.last, o),
             g: *fixed(&px.g, o),
             tfin: *fixed(&px.tfin, o),
@@ -243,26 +263,27 @@ impl<R: Real, const W: usize> Row<R, W> {
     }
 }
 
-/// The backward of entry `e` (list position `ju`) at pixel `k` of `row` (offset `dx`),
-/// updating its T and colour behind where the entry blended.
+/// The backward of entry `e` (list position `ju`) at lane `k` of `row` (offset `dx`, lane
+/// mask `act`), updating its T and colour behind where the entry blended.
 #[inline(always)]
 fn lane<R: Real, const W: usize>(
     e: &Entry<R>,
     ju: u32,
     bg: R,
     dx: R,
+    act: u32,
     row: &mut Row<R, W>,
     k: usize,
 ) -> Lane<R> {
     let (amax, amin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN));
     let (one, zero, half) = (R::one(), R::zero(), R::c(0.5));
-    let dy = row.dy;
+    let dy = row.dy[k];
     let (gp, tc, bh) = (row.g[k], row.tcur[k], row.behind[k]);
     let pw = power_of(e.a, e.b, e.c, dx, dy);
     let gk = exp_k(pw);
     let og = e.o * gk;
     let alpha = sel(mask(og > amax), amax, og);
-    let valid = row.act[k] & mask(ju < row.last[k]) & mask(pw <= zero) & mask(alpha >= amin);
+    let valid = act & mask(ju < row.last[k]) & mask(pw <= zero) & mask(alpha >= amin);
     let inv = one / (one - alpha);
     let tk = tc * inv;
     let d_alpha = gp * (e.col.mul_add(tk, -(bh * inv)) - bg * row.tfin[k] * inv);
@@ -298,55 +319,75 @@ fn add_lane<R: Real, const W: usize>(acc: &mut [[R; W]; 7], k: usize, l: &Lane<R
     acc[6][k] = sel(l.valid, acc[6][k] + l.d[6], acc[6][k]);
 }
 
-/// The backward of entry `e` (list position `ju`) at the `W` pixels from column `c0` of tile
-/// rows `rows[0]` and, if `two`, `rows[1]` (> `rows[0]`), in one lane loop so that the two
-/// rows' dependency chains run side by side; returns the lanes (OR-ed) where the entry blended.
-/// Per pixel and per column sum, the operations are those of one row at a time in ascending
-/// order, so the bits do not depend on the pairing.
+/// The backward of entry `e` (list position `ju`) at the steps `s[0]` and, if `two`, `s[1]`
+/// of half `h` (pixels and column sums of [`Step`]), in one lane loop so that their dependency
+/// chains run side by side; returns the lanes (OR-ed) where the entry blended. With 16 lanes
+/// both steps add to the same column sums, `s[0]` (the upper pair) first; with 8 lanes each
+/// to its own. Per pixel and per column sum the operations are those of one step at a time,
+/// so the bits do not depend on the pairing.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn rows_step<R: Real, const W: usize>(
     e: &Entry<R>,
     ju: u32,
     bg: R,
-    colm: &[u32; TILE],
-    xs: &[R; TILE],
-    y0: usize,
-    c0: usize,
-    rows: [usize; 2],
+    xy: &SlotLanes<R>,
+    colm: &[[u32; 16]; 2],
+    h: usize,
+    s: [Step; 2],
     two: bool,
     px: &mut Pixels<R>,
-    lanes: &mut [[R; TILE]; 7],
+    lanes: &mut [[R; 2 * TILE]; 7],
 ) -> u32 {
-    let xh: &[R; W] = fixed(xs, c0);
-    let mut a = Row::<R, W>::load(px, e, colm, y0, rows[0], c0);
+    // The columns of both parities' lanes are the same: the first W serve either.
+    let xh: &[R; W] = fixed(&xy.xs[h], 0);
+    let act: &[u32; W] = fixed(&colm[h], 0);
+    let mut a = Row::<R, W>::load(px, e, xy, s[0]);
     let mut acc = [[R::zero(); W]; 7];
     for m in 0..7 {
-        acc[m] = *fixed(&lanes[m], c0);
+        acc[m] = *fixed(&lanes[m], s[0].acc);
     }
     let mut any = 0u32;
-    if two {
-        let mut b = Row::<R, W>::load(px, e, colm, y0, rows[1], c0);
+    if two && W == 16 {
+        let mut b = Row::<R, W>::load(px, e, xy, s[1]);
         for (k, &x) in xh.iter().enumerate() {
             let dx = x - e.mx;
-            let la = lane(e, ju, bg, dx, &mut a, k);
-            let lb = lane(e, ju, bg, dx, &mut b, k);
+            let la = lane(e, ju, bg, dx, act[k], &mut a, k);
+            let lb = lane(e, ju, bg, dx, act[k], &mut b, k);
             add_lane(&mut acc, k, &la);
             add_lane(&mut acc, k, &lb);
             any |= la.valid | lb.valid;
         }
         b.store(px);
+    } else if two {
+        let mut b = Row::<R, W>::load(px, e, xy, s[1]);
+        let mut acc_b = [[R::zero(); W]; 7];
+        for m in 0..7 {
+            acc_b[m] = *fixed(&lanes[m], s[1].acc);
+        }
+        for (k, &x) in xh.iter().enumerate() {
+            let dx = x - e.mx;
+            let la = lane(e, ju, bg, dx, act[k], &mut a, k);
+            let lb = lane(e, ju, bg, dx, act[k], &mut b, k);
+            add_lane(&mut acc, k, &la);
+            add_lane(&mut acc_b, k, &lb);
+            any |= la.valid | lb.valid;
+        }
+        b.store(px);
+        for m in 0..7 {
+            lanes[m][s[1].acc..s[1].acc + W].copy_from_slice(&acc_b[m]);
+        }
     } else {
         for (k, &x) in xh.iter().enumerate() {
             let dx = x - e.mx;
-            let la = lane(e, ju, bg, dx, &mut a, k);
+            let la = lane(e, ju, bg, dx, act[k], &mut a, k);
             add_lane(&mut acc, k, &la);
             any |= la.valid;
         }
     }
     a.store(px);
     for m in 0..7 {
-        lanes[m][c0..c0 + W].copy_from_slice(&acc[m]);
+        lanes[m][s[0].acc..s[0].acc + W].copy_from_slice(&acc[m]);
     }
     any
 }

@@ -8,18 +8,19 @@ use rayon::prelude::*;
 use super::super::lanes::{add_blend, exp_k, mask, power_of, sel};
 use super::super::tiles::{self, TileBins, TILE};
 use super::dispatch::{self, Kernel};
-use super::worklist::{pack, tile_entries, Entry, Packed, WorkLists};
-use super::{CompositeSaved, KernelWork, Phase, Splats, ALPHA_MAX, ALPHA_MIN, TP, T_MIN};
+use super::worklist::{gather, pack, Entry, Packed, WorkLists};
+use super::{CompositeSaved, KernelWork, Lines, Phase, Splats, ALPHA_MAX, ALPHA_MIN, TP, T_MIN};
 use crate::image2d::Image2d;
 use crate::real::Real;
 use crate::simd::Simd;
 
 /// Per-tile forward result: colour (without background), final T, n_contrib, tile-local, and
 /// the prefix of the work list up to the largest n_contrib (what the backward visits).
+#[repr(C)]
 pub(super) struct TileOut<R> {
-    color: [R; TP],
-    t: [R; TP],
-    last: [u32; TP],
+    color: Lines<[R; TP]>,
+    t: Lines<[R; TP]>,
+    last: Lines<[u32; TP]>,
     blends: u64,
     stats: KernelWork,
     work: Vec<Entry<R>>,
@@ -118,22 +119,22 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
     let [x0, x1, y0, y1] = bins.pixel_rect(t);
     let npix = ((x1 - x0) * (y1 - y0)) as u32;
     let mut out = TileOut {
-        color: [R::zero(); TP],
-        t: [R::one(); TP],
-        last: [0u32; TP],
+        color: Lines([R::zero(); TP]),
+        t: Lines([R::one(); TP]),
+        last: Lines([0u32; TP]),
         blends: 0,
         stats: KernelWork::default(),
         work: Vec::new(),
     };
-    let mut done = [0u32; TP];
+    let mut done = Lines([0u32; TP]);
     // Blends per pixel (summed at the end of the tile: no horizontal sum per lane vector).
-    let mut nblend = [0u32; TP];
+    let mut nblend = Lines([0u32; TP]);
     let mut st = State {
-        t: &mut out.t,
-        color: &mut out.color,
-        last: &mut out.last,
-        done: &mut done,
-        nblend: &mut nblend,
+        t: &mut out.t.0,
+        color: &mut out.color.0,
+        last: &mut out.last.0,
+        done: &mut done.0,
+        nblend: &mut nblend.0,
     };
     let mut stats = KernelWork::default();
     let mut n_done = 0u32;
@@ -151,14 +152,27 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
     let half = R::c(0.5);
     // Pixel-centre x coordinates of the tile's columns.
     let xs: [R; TILE] = std::array::from_fn(|k| R::c((x0 + k) as f64) + half);
-    // The whole work list is gathered first; its prefix up to the largest n_contrib is kept for
-    // the backward.
-    let entries = tile_entries(packed, bins, t);
-    for (j, e) in entries.iter().enumerate() {
+    // The work list is gathered as the loop goes, `GATHER` list positions at a time (the
+    // splats behind the point where every pixel is done are never read); its prefix up to the
+    // largest n_contrib is kept for the backward.
+    let list_len = bins.list(t).len();
+    let mut entries = Vec::with_capacity(list_len);
+    let mut from = 0;
+    let mut j = 0;
+    loop {
+        if j == entries.len() {
+            if from == list_len {
+                break;
+            }
+            from = gather(packed, bins, t, from, &mut entries);
+            continue;
+        }
         if n_done == npix {
             break;
         }
-        let tag = j as u32 + 1;
+        let e = &entries[j];
+        j += 1;
+        let tag = j as u32;
         stats.entries += 1;
         let (k0, k1) = (e.x0 as usize - x0, e.x1 as usize - x0);
         let colm: [u32; TILE] = std::array::from_fn(|k| mask(k0 <= k && k < k1));
@@ -226,10 +240,9 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
         }
     }
     out.stats = stats;
-    out.blends = nblend.iter().map(|&n| n as u64).sum();
+    out.blends = nblend.0.iter().map(|&n| n as u64).sum();
     // The backward visits the entries before the largest n_contrib only.
-    let mut entries = entries;
-    entries.truncate(out.last.iter().copied().max().unwrap_or(0) as usize);
+    entries.truncate(out.last.0.iter().copied().max().unwrap_or(0) as usize);
     out.work = entries;
     out
 }
@@ -321,9 +334,9 @@ fn forward_kernel_probed<R: Real>(
             for col in x0..x1 {
                 let p = (row - y0) * TILE + col - x0;
                 let q = row * width + col;
-                img.data[q] = o.color[p] + o.t[p] * background;
-                final_t[q] = o.t[p];
-                n_contrib[q] = o.last[p];
+                img.data[q] = o.color.0[p] + o.t.0[p] * background;
+                final_t[q] = o.t.0[p];
+                n_contrib[q] = o.last.0[p];
             }
         }
     }

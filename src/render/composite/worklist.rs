@@ -164,19 +164,45 @@ pub(super) fn tile_entries<R: Real>(
     bins: &TileBins,
     t: usize,
 ) -> Vec<Entry<R>> {
+    let n = bins.list(t).len();
+    let mut entries = Vec::with_capacity(n);
+    let mut from = 0;
+    while from < n {
+        from = gather(packed, bins, t, from, &mut entries);
+    }
+    entries
+}
+
+/// List positions that [`gather`] reads per call.
+pub(super) const GATHER: usize = 64;
+
+/// Appends to `entries` the work-list entries ([`tile_entries`]) of the [`GATHER`] positions
+/// of tile `t`'s list from `from` on (fewer at its end), and returns the next position. The
+/// forward gathers its list this way as it goes, so that the splats behind a tile whose pixels
+/// are all done are never read.
+#[inline(always)]
+pub(super) fn gather<R: Real>(
+    packed: &[Option<Packed<R>>],
+    bins: &TileBins,
+    t: usize,
+    from: usize,
+    entries: &mut Vec<Entry<R>>,
+) -> usize {
     let [rx0, rx1, ry0, ry1] = bins.pixel_rect(t).map(|x| x as u32);
     // The gather first, in a loop of independent loads with the records `PREFETCH` entries
     // ahead requested early, so that the cache misses of the random per-splat reads overlap;
     // then the chord tests. Entries whose box misses the tile are dropped.
     const PREFETCH: usize = 16;
     let list = bins.list(t);
-    let mut chords = Vec::with_capacity(list.len());
-    let mut entries = Vec::with_capacity(list.len());
-    for (j, &id) in list.iter().enumerate() {
+    let to = (from + GATHER).min(list.len());
+    let start = entries.len();
+    let mut chords = [[0.0f64; 6]; GATHER];
+    let mut n = 0;
+    for j in from..to {
         if let Some(&ahead) = list.get(j + PREFETCH) {
             prefetch(&packed[ahead as usize]);
         }
-        let Some(Packed { e, chord }) = &packed[id as usize] else {
+        let Some(Packed { e, chord }) = &packed[list[j] as usize] else {
             continue;
         };
         let (x0, x1) = (e.x0.max(rx0), e.x1.min(rx1));
@@ -189,13 +215,14 @@ pub(super) fn tile_entries<R: Real>(
                 y1,
                 ..*e
             });
-            chords.push(*chord);
+            chords[n] = *chord;
+            n += 1;
         }
     }
-    for (e, chord) in entries.iter_mut().zip(&chords) {
+    for (e, chord) in entries[start..].iter_mut().zip(&chords[..n]) {
         e.halves = halves_word(chord, e.y0, e.y1, rx0, ry0);
     }
-    entries
+    to
 }
 
 /// Ask the CPU to bring the cache lines of `x` into the cache (a hint: no effect on results).
