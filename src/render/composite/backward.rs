@@ -118,20 +118,30 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
                 );
             };
             if W == 16 {
-                // One step per pair, two pairs per lane loop (independent dependency chains
-                // side by side, adding to the same column sums in row order).
+                // One step per pair, up to four pairs per lane loop (independent dependency
+                // chains side by side, adding to the same column sums in row order).
                 stats.lanes += (16 * pairs.count_ones()) as u64;
                 let mut bits = pairs;
+                let (xy, c, p, l) = (&lanes_xy, &colm, &mut px, &mut lanes.0);
                 while bits != 0 {
-                    let a = Step::of(bits.trailing_zeros() as usize / 4, h, 0);
-                    bits &= bits - 1;
+                    let a = Step::take(&mut bits, h);
                     if bits == 0 {
-                        step(a, a, false);
+                        any |= rows_step::<R, W>(e, ju, bg, xy, c, h, [a, a], false, p, l);
                         break;
                     }
-                    let b = Step::of(bits.trailing_zeros() as usize / 4, h, 0);
-                    bits &= bits - 1;
-                    step(a, b, true);
+                    let b = Step::take(&mut bits, h);
+                    any |= match bits.count_ones() {
+                        0 => pairs_step2::<R, W>(e, ju, bg, xy, c, h, [a, b], p, l),
+                        1 => {
+                            let s = [a, b, Step::take(&mut bits, h)];
+                            pairs_step3::<R, W>(e, ju, bg, xy, c, h, s, p, l)
+                        }
+                        _ => {
+                            let c3 = Step::take(&mut bits, h);
+                            let s = [a, b, c3, Step::take(&mut bits, h)];
+                            pairs_step4::<R, W>(e, ju, bg, xy, c, h, s, p, l)
+                        }
+                    };
                 }
             } else {
                 // One lane loop per pair, over its even and its odd row side by side (each
@@ -203,6 +213,15 @@ struct Step {
 }
 
 impl Step {
+    /// The 16-lane step of the lowest pair set in `bits` (bit 4 m: pair m), half `h`, that bit
+    /// cleared.
+    #[inline(always)]
+    fn take(bits: &mut u32, h: usize) -> Step {
+        let m = bits.trailing_zeros() as usize / 4;
+        *bits &= *bits - 1;
+        Step::of(m, h, 0)
+    }
+
     /// Pair `m`, half `h`, from the pixels of row parity `p` on (0: both rows with 16 lanes).
     #[inline(always)]
     fn of(m: usize, h: usize, p: usize) -> Step {
@@ -319,12 +338,62 @@ fn add_lane<R: Real, const W: usize>(acc: &mut [[R; W]; 7], k: usize, l: &Lane<R
     acc[6][k] = sel(l.valid, acc[6][k] + l.d[6], acc[6][k]);
 }
 
-/// The backward of entry `e` (list position `ju`) at the steps `s[0]` and, if `two`, `s[1]`
-/// of half `h` (pixels and column sums of [`Step`]), in one lane loop so that their dependency
-/// chains run side by side; returns the lanes (OR-ed) where the entry blended. With 16 lanes
-/// both steps add to the same column sums, `s[0]` (the upper pair) first; with 8 lanes each
-/// to its own. Per pixel and per column sum the operations are those of one step at a time,
-/// so the bits do not depend on the pairing.
+/// `$name`: the backward of entry `e` (list position `ju`) at the 16-lane steps `s` of half `h`
+/// (pixels and column sums of [`Step`]; `s` in ascending pairs, one row state `$row` and lane
+/// result `$lane` per step), in one lane loop so that their dependency chains run side by
+/// side; returns the lanes (OR-ed) where the entry blended. All add to the same column sums,
+/// `s[0]` first: per pixel and per column sum the operations are those of one step at a time
+/// in order, so the bits do not depend on the grouping. (Written out per count by a macro: a
+/// loop over an array of row states is not vectorised.)
+macro_rules! pairs_step {
+    ($name:ident, $n:literal, $(($row:ident, $lane:ident)),+) => {
+        #[allow(clippy::too_many_arguments)]
+        #[inline(always)]
+        fn $name<R: Real, const W: usize>(
+            e: &Entry<R>,
+            ju: u32,
+            bg: R,
+            xy: &SlotLanes<R>,
+            colm: &[[u32; 16]; 2],
+            h: usize,
+            s: [Step; $n],
+            px: &mut Pixels<R>,
+            lanes: &mut [[R; 2 * TILE]; 7],
+        ) -> u32 {
+            let xh: &[R; W] = fixed(&xy.xs[h], 0);
+            let act: &[u32; W] = fixed(&colm[h], 0);
+            let acc0 = s[0].acc;
+            let [$($row),+] = s;
+            $(let mut $row = Row::<R, W>::load(px, e, xy, $row);)+
+            let mut acc = [[R::zero(); W]; 7];
+            for m in 0..7 {
+                acc[m] = *fixed(&lanes[m], acc0);
+            }
+            let mut any = 0u32;
+            for (k, &x) in xh.iter().enumerate() {
+                let dx = x - e.mx;
+                $(let $lane = lane(e, ju, bg, dx, act[k], &mut $row, k);)+
+                $(add_lane(&mut acc, k, &$lane);)+
+                any |= 0 $(| $lane.valid)+;
+            }
+            $($row.store(px);)+
+            for m in 0..7 {
+                lanes[m][acc0..acc0 + W].copy_from_slice(&acc[m]);
+            }
+            any
+        }
+    };
+}
+
+pairs_step!(pairs_step2, 2, (a, la), (b, lb));
+pairs_step!(pairs_step3, 3, (a, la), (b, lb), (c, lc));
+pairs_step!(pairs_step4, 4, (a, la), (b, lb), (c, lc), (d, ld));
+
+/// The 8-lane backward of entry `e` (list position `ju`) at the step `s[0]` and, if `two`, at
+/// `s[1]` (the even and the odd row of a pair, each with its own column sums) of half `h`, in
+/// one lane loop so that the two rows' dependency chains run side by side; returns the lanes
+/// (OR-ed) where the entry blended. Per pixel and per column sum the operations are those of
+/// one row at a time.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn rows_step<R: Real, const W: usize>(
@@ -348,18 +417,7 @@ fn rows_step<R: Real, const W: usize>(
         acc[m] = *fixed(&lanes[m], s[0].acc);
     }
     let mut any = 0u32;
-    if two && W == 16 {
-        let mut b = Row::<R, W>::load(px, e, xy, s[1]);
-        for (k, &x) in xh.iter().enumerate() {
-            let dx = x - e.mx;
-            let la = lane(e, ju, bg, dx, act[k], &mut a, k);
-            let lb = lane(e, ju, bg, dx, act[k], &mut b, k);
-            add_lane(&mut acc, k, &la);
-            add_lane(&mut acc, k, &lb);
-            any |= la.valid | lb.valid;
-        }
-        b.store(px);
-    } else if two {
+    if two {
         let mut b = Row::<R, W>::load(px, e, xy, s[1]);
         let mut acc_b = [[R::zero(); W]; 7];
         for m in 0..7 {
