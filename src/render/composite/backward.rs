@@ -71,6 +71,15 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
     if max_last == 0 {
         return (Vec::new(), KernelWork::default());
     }
+    // The halves by their largest n_contrib, descending: going back from the last entry, a
+    // half becomes live (some pixel has j < n_contrib) at j = its n_contrib - 1 and stays so.
+    let mut by_last: [(u32, u32); 2 * TILE] = [(0, 0); 2 * TILE];
+    for (i, (b, &l)) in by_last.iter_mut().zip(&half_last).enumerate() {
+        *b = (l, i as u32);
+    }
+    by_last.sort_unstable_by(|a, b| b.cmp(a));
+    let mut next_live = 0;
+    let mut live = 0u32;
     let built;
     let entries: &[Entry<R>] = if saved.work.tiles.len() == bins.n_tiles() {
         &saved.work.tiles[t]
@@ -94,7 +103,10 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
         let mut lanes = Lines([[zero; 2 * TILE]; 7]);
         // The halves this entry visits: those its chord meets with a pixel where it may still
         // blend (`j < n_contrib`), bit 2 r + h as in `Entry::halves`.
-        let live = (0..2 * TILE).fold(0u32, |b, i| b | ((ju < half_last[i]) as u32) << i);
+        while next_live < 2 * TILE && ju < by_last[next_live].0 {
+            live |= 1 << by_last[next_live].1;
+            next_live += 1;
+        }
         let visit = e.halves & live;
         stats.rows += ((visit | visit >> 1) & 0x5555_5555).count_ones() as u64;
         let colm = lanes_xy.columns(k0, k1);
