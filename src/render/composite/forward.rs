@@ -79,8 +79,9 @@ fn blend_lanes<R: Real, const L: usize>(
     stops
 }
 
-/// [`blend_lanes`] for two tile rows of 16 pixels at once (offsets `o[0]`, `o[1]`, row offsets
-/// `dy[0]`, `dy[1]`), each row's state copied into local arrays so that the two rows' chains
+/// [`blend_lanes`] for two runs of `L` pixels at once (two whole tile rows, or two 8-column
+/// halves of rows; per run `i`: tile-local offset `o[i]`, column offsets `xh[i]`, row offset
+/// `dy[i]`, lanes `act[i]`), each run's state copied into local arrays so that the two chains
 /// run side by side in one lane loop; the same operations per pixel.
 #[inline(always)]
 fn blend_rows2<R: Real, const L: usize>(
@@ -269,19 +270,21 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
                 let xh: &[R; 8] = xs[c0..c0 + 8].try_into().unwrap();
                 let dy = [R::c((y0 + r) as f64) + half - e.my; 8];
                 let stops = blend_lanes(e, tag, xh, &dy, act, &mut st, r * TILE + c0);
-                if stops.iter().fold(0, |a, &s| a | s) != 0 {
-                    let nd: u32 = stops.iter().sum();
-                    n_done += nd;
-                    half_done[r][h] += nd;
-                    if half_done[r][h] == half_len[h] {
-                        done_bits |= 1 << (2 * r + h);
-                    }
-                }
+                count_half(
+                    &stops,
+                    r,
+                    h,
+                    &half_len,
+                    &mut half_done,
+                    &mut n_done,
+                    &mut done_bits,
+                );
             }};
         }
-        // The visits run over the set bits of `todo` or `rows`: no branch per row or half
-        // but the loop's own and, with 16 lanes, the one between a half and a whole row
-        // (about 10 % faster than testing each row, docs/measurements.md).
+        // The visits run over the set bits of `todo`: no branch per row or half but the
+        // loops' own (about 10 % faster than testing each row, docs/measurements.md); with 16
+        // lanes, the rows with one half to visit first, then the whole rows, two per lane
+        // loop (the two rows' chains side by side).
         if W == 8 {
             let mut bits = todo;
             while bits != 0 {
@@ -309,9 +312,25 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
                 let x8 = |h: usize| -> &[R; 8] { xs[8 * h..8 * h + 8].try_into().unwrap() };
                 let a8 = |h: usize| -> &[u32; 8] { colm[8 * h..8 * h + 8].try_into().unwrap() };
                 let dyr = |r: usize| R::c((y0 + r) as f64) + half - e.my;
-                let stops = blend_rows2(e, tag, [x8(h), x8(h2)], [dyr(r), dyr(r2)], [a8(h), a8(h2)], &mut st, [r * TILE + 8 * h, r2 * TILE + 8 * h2]);
+                let stops = blend_rows2(
+                    e,
+                    tag,
+                    [x8(h), x8(h2)],
+                    [dyr(r), dyr(r2)],
+                    [a8(h), a8(h2)],
+                    &mut st,
+                    [r * TILE + 8 * h, r2 * TILE + 8 * h2],
+                );
                 for (s, (r, h)) in stops.iter().zip([(r, h), (r2, h2)]) {
-                    count_half(s, r, h, &half_len, &mut half_done, &mut n_done, &mut done_bits);
+                    count_half(
+                        s,
+                        r,
+                        h,
+                        &half_len,
+                        &mut half_done,
+                        &mut n_done,
+                        &mut done_bits,
+                    );
                 }
             }
             // Whole rows, two per lane loop.
@@ -324,13 +343,28 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
                     stats.lanes += TILE as u64;
                     let dy = [dyr(r); TILE];
                     let stops = blend_lanes(e, tag, &xs, &dy, &colm, &mut st, r * TILE);
-                    count_stops(&stops, r, &half_len, &mut half_done, &mut n_done, &mut done_bits);
+                    count_stops(
+                        &stops,
+                        r,
+                        &half_len,
+                        &mut half_done,
+                        &mut n_done,
+                        &mut done_bits,
+                    );
                     break;
                 }
                 let r2 = bits.trailing_zeros() as usize / 2;
                 bits &= bits - 1;
                 stats.lanes += 2 * TILE as u64;
-                let stops = blend_rows2(e, tag, [&xs; 2], [dyr(r), dyr(r2)], [&colm; 2], &mut st, [r * TILE, r2 * TILE]);
+                let stops = blend_rows2(
+                    e,
+                    tag,
+                    [&xs; 2],
+                    [dyr(r), dyr(r2)],
+                    [&colm; 2],
+                    &mut st,
+                    [r * TILE, r2 * TILE],
+                );
                 for (s, r) in stops.iter().zip([r, r2]) {
                     count_stops(s, r, &half_len, &mut half_done, &mut n_done, &mut done_bits);
                 }
