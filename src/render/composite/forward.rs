@@ -253,7 +253,12 @@ pub(super) fn forward_tile<R: Real, const W: usize>(
         let tag = j as u32;
         stats.entries += 1;
         let (k0, k1) = (e.x0 as usize - x0, e.x1 as usize - x0);
-        let colm: [u32; TILE] = std::array::from_fn(|k| mask(k0 <= k && k < k1));
+        // The entry's columns as lane masks, from a bit word (shifts, no compares).
+        let cols = (1u32 << k1) - (1u32 << k0);
+        let mut colm = [0u32; TILE];
+        for (k, m) in colm.iter_mut().enumerate() {
+            *m = 0u32.wrapping_sub(cols >> k & 1);
+        }
         // The halves this entry visits: those meeting its chord with a pixel left.
         let todo = e.halves & !done_bits;
         // Its rows: bit 2 r set when row r has a half to visit.
