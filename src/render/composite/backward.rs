@@ -115,26 +115,12 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
             // Bit 2 r: row r visits half h; bit 4 m: pair m has a row visiting it.
             let rows = visit >> h & 0x5555_5555;
             let pairs = (rows | rows >> 2) & 0x1111_1111;
-            let mut step = |a: Step, b: Step, two: bool| {
-                any |= rows_step::<R, W>(
-                    e,
-                    ju,
-                    bg,
-                    &lanes_xy,
-                    &colm,
-                    h,
-                    [a, b],
-                    two,
-                    &mut px,
-                    &mut lanes.0,
-                );
-            };
+            let (xy, c, p, l) = (&lanes_xy, &colm, &mut px, &mut lanes.0);
             if W == 16 {
                 // One step per pair, up to four pairs per lane loop (independent dependency
                 // chains side by side, adding to the same column sums in row order).
                 stats.lanes += (16 * pairs.count_ones()) as u64;
                 let mut bits = pairs;
-                let (xy, c, p, l) = (&lanes_xy, &colm, &mut px, &mut lanes.0);
                 while bits != 0 {
                     let a = Step::take(&mut bits, h);
                     if bits == 0 {
@@ -165,11 +151,11 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
                     bits &= bits - 1;
                     let g = rows >> (4 * m) & 5;
                     let (even, odd) = (Step::of(m, h, 0), Step::of(m, h, 1));
-                    match g {
-                        5 => step(even, odd, true),
-                        1 => step(even, even, false),
-                        _ => step(odd, odd, false),
-                    }
+                    any |= match g {
+                        5 => rows_step::<R, W>(e, ju, bg, xy, c, h, [even, odd], true, p, l),
+                        1 => rows_step::<R, W>(e, ju, bg, xy, c, h, [even, even], false, p, l),
+                        _ => rows_step::<R, W>(e, ju, bg, xy, c, h, [odd, odd], false, p, l),
+                    };
                 }
             }
         }
@@ -401,11 +387,11 @@ pairs_step!(pairs_step2, 2, (a, la), (b, lb));
 pairs_step!(pairs_step3, 3, (a, la), (b, lb), (c, lc));
 pairs_step!(pairs_step4, 4, (a, la), (b, lb), (c, lc), (d, ld));
 
-/// The 8-lane backward of entry `e` (list position `ju`) at the step `s[0]` and, if `two`, at
-/// `s[1]` (the even and the odd row of a pair, each with its own column sums) of half `h`, in
-/// one lane loop so that the two rows' dependency chains run side by side; returns the lanes
-/// (OR-ed) where the entry blended. Per pixel and per column sum the operations are those of
-/// one row at a time.
+/// The backward of entry `e` (list position `ju`) at the step `s[0]` of half `h` and, if `two`
+/// (8 lanes only), at `s[1]` (the even and the odd row of a pair, each with its own column
+/// sums), in one lane loop so that the two rows' dependency chains run side by side; returns
+/// the lanes (OR-ed) where the entry blended. With 16 lanes and `two` false: one pair's step.
+/// Per pixel and per column sum the operations are those of one row at a time.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn rows_step<R: Real, const W: usize>(
@@ -420,7 +406,9 @@ fn rows_step<R: Real, const W: usize>(
     px: &mut Pixels<R>,
     lanes: &mut [[R; 2 * TILE]; 7],
 ) -> u32 {
-    // The columns of both parities' lanes are the same: the first W serve either.
+    // The columns of both parities' lanes are the same: the first W serve either. The lanes
+    // are masked by the entry's columns only: a lane in a row or half the entry does not
+    // visit fails the alpha test (outside its chord) or the n_contrib test.
     let xh: &[R; W] = fixed(&xy.xs[h], 0);
     let act: &[u32; W] = fixed(&colm[h], 0);
     let mut a = Row::<R, W>::load(px, e, xy, s[0]);
