@@ -261,6 +261,40 @@ fn backward_with_saved_work_lists_equals_rebuilt_lists_bitwise() {
     }
 }
 
+#[test]
+fn a_tile_saturated_early_in_a_long_list_matches_the_reference() {
+    // One 16 x 16 tile with a list several gather chunks long, opaque enough that every pixel
+    // is done far before its end: the forward gathers the list in chunks and stops reading at
+    // the last blend; image, n_contrib, kept work list and gradients must be those of the
+    // whole list.
+    let (w, h) = (16, 16);
+    let mut s = random_splats(700, w, h, 41);
+    for o in s.opacity.iter_mut() {
+        *o = 0.3 + 0.69 * *o;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(42);
+    let d = Image2d::from_vec(
+        w,
+        h,
+        (0..w * h).map(|_| rng.random_range(-1.0..1.0)).collect(),
+    );
+    let (img, saved) = forward(&s, w, h, 0.1);
+    assert_eq!(img, naive_forward(&s, w, h, 0.1));
+    let listed = saved.bins.list(0).len();
+    let visited = saved.forward_work.entries as usize;
+    println!(
+        "list {listed}, visited {visited}, kept {}",
+        saved.work.tiles[0].len()
+    );
+    assert!(
+        listed > 4 * 64 && visited + 2 * 64 < listed,
+        "{listed} {visited}"
+    );
+    let mut bare = saved.clone();
+    bare.work = WorkLists::default();
+    assert_eq!(backward(&s, &saved, &d), backward(&s, &bare, &d));
+}
+
 /// Every compiled kernel this CPU can run: (instruction set, 16 lanes?).
 fn kernels() -> Vec<Kernel> {
     let mut k = vec![Kernel {

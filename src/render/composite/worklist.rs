@@ -174,7 +174,7 @@ pub(super) fn tile_entries<R: Real>(
 }
 
 /// List positions that [`gather`] reads per call.
-pub(super) const GATHER: usize = 64;
+const GATHER: usize = 64;
 
 /// Appends to `entries` the work-list entries ([`tile_entries`]) of the [`GATHER`] positions
 /// of tile `t`'s list from `from` on (fewer at its end), and returns the next position. The
