@@ -35,6 +35,42 @@ struct State<'a, R> {
     nblend: &'a mut [u32; TP],
 }
 
+/// Eqs. (4)-(5) for entry `e` (list position `tag` - 1) at one pixel with centre offsets
+/// (`dx`, `dy`), lane mask `act` and state T `t`, colour `c`, n_contrib `l`, done `d`, blends
+/// `n`; returns the stop mask. Branch-free (so that the loops calling it vectorise): selects
+/// reproduce the sequential skip / stop / blend logic exactly.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn blend_pixel<R: Real>(
+    e: &Entry<R>,
+    tag: u32,
+    dx: R,
+    dy: R,
+    act: u32,
+    t: &mut R,
+    c: &mut R,
+    l: &mut u32,
+    d: &mut u32,
+    n: &mut u32,
+) -> u32 {
+    let (amax, amin, tmin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN), R::c(T_MIN));
+    let pw = power_of(e.a, e.b, e.c, dx, dy);
+    let og = e.o * exp_k(pw);
+    let alpha = sel(mask(og > amax), amax, og);
+    let tt = *t;
+    let next = tt * (R::one() - alpha);
+    let valid = act & !*d & mask(pw <= R::zero()) & mask(alpha >= amin);
+    let stop = valid & mask(next < tmin);
+    let blend = valid & !stop;
+    let c_new = add_blend(*c, e.col, alpha, tt);
+    *c = sel(blend, c_new, *c);
+    *t = sel(blend, next, tt);
+    *l = (tag & blend) | (*l & !blend);
+    *d |= stop;
+    *n += blend & 1;
+    stop
+}
+
 /// Eqs. (4)-(5) for entry `e` (list position `tag` - 1) at the `L` pixels from tile-local
 /// offset `o`, with pixel-centre offsets `xh` (columns) and `dy` (rows) per lane and the lanes
 /// `act`; returns the lanes that stopped (1) or not (0). Branch-free over the lanes
@@ -50,8 +86,6 @@ fn blend_lanes<R: Real, const L: usize>(
     st: &mut State<'_, R>,
     o: usize,
 ) -> [u32; L] {
-    let (amax, amin, tmin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN), R::c(T_MIN));
-    let one = R::one();
     let tr: &mut [R; L] = (&mut st.t[o..o + L]).try_into().unwrap();
     let cr: &mut [R; L] = (&mut st.color[o..o + L]).try_into().unwrap();
     let lr: &mut [u32; L] = (&mut st.last[o..o + L]).try_into().unwrap();
@@ -59,22 +93,8 @@ fn blend_lanes<R: Real, const L: usize>(
     let nr: &mut [u32; L] = (&mut st.nblend[o..o + L]).try_into().unwrap();
     let mut stops = [0u32; L];
     for k in 0..L {
-        let dx = xh[k] - e.mx;
-        let pw = power_of(e.a, e.b, e.c, dx, dy[k]);
-        let og = e.o * exp_k(pw);
-        let alpha = sel(mask(og > amax), amax, og);
-        let tt = tr[k];
-        let next = tt * (one - alpha);
-        let valid = act[k] & !dr[k] & mask(pw <= R::zero()) & mask(alpha >= amin);
-        let stop = valid & mask(next < tmin);
-        let blend = valid & !stop;
-        let c_new = add_blend(cr[k], e.col, alpha, tt);
-        cr[k] = sel(blend, c_new, cr[k]);
-        tr[k] = sel(blend, next, tt);
-        lr[k] = (tag & blend) | (lr[k] & !blend);
-        dr[k] |= stop;
-        nr[k] += blend & 1;
-        stops[k] = stop & 1;
+        let (t, c, l, d, n) = (&mut tr[k], &mut cr[k], &mut lr[k], &mut dr[k], &mut nr[k]);
+        stops[k] = blend_pixel(e, tag, xh[k] - e.mx, dy[k], act[k], t, c, l, d, n) & 1;
     }
     stops
 }
@@ -93,8 +113,6 @@ fn blend_rows2<R: Real, const L: usize>(
     st: &mut State<'_, R>,
     o: [usize; 2],
 ) -> [[u32; L]; 2] {
-    let (amax, amin, tmin) = (R::c(ALPHA_MAX), R::c(ALPHA_MIN), R::c(T_MIN));
-    let one = R::one();
     let get = |v: &[R; TP], i: usize| -> [R; L] { v[o[i]..o[i] + L].try_into().unwrap() };
     let getu = |v: &[u32; TP], i: usize| -> [u32; L] { v[o[i]..o[i] + L].try_into().unwrap() };
     let mut tr = [get(st.t, 0), get(st.t, 1)];
@@ -105,22 +123,10 @@ fn blend_rows2<R: Real, const L: usize>(
     let mut stops = [[0u32; L]; 2];
     for k in 0..L {
         for i in [0, 1] {
+            let (t, c, l) = (&mut tr[i][k], &mut cr[i][k], &mut lr[i][k]);
+            let (d, n) = (&mut dr[i][k], &mut nr[i][k]);
             let dx = xh[i][k] - e.mx;
-            let pw = power_of(e.a, e.b, e.c, dx, dy[i]);
-            let og = e.o * exp_k(pw);
-            let alpha = sel(mask(og > amax), amax, og);
-            let tt = tr[i][k];
-            let next = tt * (one - alpha);
-            let valid = act[i][k] & !dr[i][k] & mask(pw <= R::zero()) & mask(alpha >= amin);
-            let stop = valid & mask(next < tmin);
-            let blend = valid & !stop;
-            let c_new = add_blend(cr[i][k], e.col, alpha, tt);
-            cr[i][k] = sel(blend, c_new, cr[i][k]);
-            tr[i][k] = sel(blend, next, tt);
-            lr[i][k] = (tag & blend) | (lr[i][k] & !blend);
-            dr[i][k] |= stop;
-            nr[i][k] += blend & 1;
-            stops[i][k] = stop & 1;
+            stops[i][k] = blend_pixel(e, tag, dx, dy[i], act[i][k], t, c, l, d, n) & 1;
         }
     }
     for i in [0, 1] {
@@ -172,13 +178,9 @@ fn count_stops(
     if stops.iter().fold(0, |a, &s| a | s) == 0 {
         return;
     }
-    for (h, s) in stops.chunks_exact(8).enumerate() {
-        let nd: u32 = s.iter().sum();
-        *n_done += nd;
-        half_done[r][h] += nd;
-        if half_done[r][h] == half_len[h] {
-            *done_bits |= 1 << (2 * r + h);
-        }
+    for h in 0..2 {
+        let s: &[u32; 8] = stops[8 * h..8 * h + 8].try_into().unwrap();
+        count_half(s, r, h, half_len, half_done, n_done, done_bits);
     }
 }
 
