@@ -25,8 +25,15 @@ pub struct CovParts<R: Real> {
 #[inline(always)]
 pub fn covariance<R: Real>(log_scale: [R; 3], q: [R; 4]) -> Option<(Mat3<R>, CovParts<R>)> {
     let (norm, qn) = normalize(q)?;
+    let scale = [log_scale[0].exp(), log_scale[1].exp(), log_scale[2].exp()];
+    Some(covariance_scaled(norm, qn, scale))
+}
+
+/// [`covariance`] from its activated parameters: |q|, q / |q| and exp(log_scale). Branch-free
+/// (loops over Gaussians that compute the exponentials first vectorise).
+#[inline(always)]
+pub fn covariance_scaled<R: Real>(norm: R, qn: [R; 4], scale: [R; 3]) -> (Mat3<R>, CovParts<R>) {
     let rot = rotmat_unit(qn);
-    let scale = log_scale.map(|v| v.exp());
     // M = R S; Sigma = M M^T.
     let mut m = rot;
     for row in m.iter_mut() {
@@ -42,7 +49,7 @@ pub fn covariance<R: Real>(log_scale: [R; 3], q: [R; 4]) -> Option<(Mat3<R>, Cov
             sigma[j][i] = v;
         }
     }
-    Some((
+    (
         sigma,
         CovParts {
             norm,
@@ -50,7 +57,7 @@ pub fn covariance<R: Real>(log_scale: [R; 3], q: [R; 4]) -> Option<(Mat3<R>, Cov
             rot,
             scale,
         },
-    ))
+    )
 }
 
 /// VJP of [`covariance`]. `g` is d L / d Sigma in the *symmetric* convention (g = g^T, each

@@ -6,13 +6,17 @@ use crate::real::Real;
 /// Returns `None` unless det > 0 (a NaN det fails the test too).
 #[inline(always)]
 pub fn sym2_inverse<R: Real>(a: R, b: R, c: R) -> Option<[R; 3]> {
+    let (ok, conic) = sym2_inverse_unchecked(a, b, c);
+    ok.then_some(conic)
+}
+
+/// [`sym2_inverse`] without a branch (so that loops over Gaussians vectorise): whether the
+/// determinant is positive, and the inverse (meaningless when it is not). The same operations.
+#[inline(always)]
+pub fn sym2_inverse_unchecked<R: Real>(a: R, b: R, c: R) -> (bool, [R; 3]) {
     let det = a * c - b * b;
-    if det > R::zero() {
-        let inv = R::one() / det;
-        Some([c * inv, -b * inv, a * inv])
-    } else {
-        None
-    }
+    let inv = R::one() / det;
+    (det > R::zero(), [c * inv, -b * inv, a * inv])
 }
 
 /// VJP of [`sym2_inverse`]: given the gradient (gA, gB, gC) of the three conic entries (B is a

@@ -18,14 +18,19 @@ pub const MIN_QUAT_NORM2: f64 = 1e-24;
 /// |q| and q / |q|, or `None` if |q|^2 < [`MIN_QUAT_NORM2`] or is NaN.
 #[inline(always)]
 pub fn normalize<R: Real>(q: [R; 4]) -> Option<(R, [R; 4])> {
+    let (ok, n, qn) = normalize_unchecked(q);
+    ok.then_some((n, qn))
+}
+
+/// [`normalize`] without a branch (so that loops over Gaussians vectorise): whether q is valid,
+/// |q| and q / |q| (meaningless when it is not valid). The same operations as [`normalize`].
+#[inline(always)]
+pub fn normalize_unchecked<R: Real>(q: [R; 4]) -> (bool, R, [R; 4]) {
     let n2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3];
-    if n2 >= R::c(MIN_QUAT_NORM2) && n2.is_finite() {
-        let n = n2.sqrt();
-        let inv = R::one() / n;
-        Some((n, q.map(|v| v * inv)))
-    } else {
-        None
-    }
+    let ok = (n2 >= R::c(MIN_QUAT_NORM2)) & n2.is_finite();
+    let n = n2.sqrt();
+    let inv = R::one() / n;
+    (ok, n, [q[0] * inv, q[1] * inv, q[2] * inv, q[3] * inv])
 }
 
 /// Rotation matrix of a *unit* quaternion (w, x, y, z) (3DGS `computeCov3D`, gsplat

@@ -33,7 +33,11 @@
 //! parameters (cheap, no per-Gaussian storage); `ProjectSaved` keeps the visibility mask.
 //!
 //! Parallelism: rayon over fixed chunks of `par::CHUNK` Gaussians; each Gaussian is an
-//! independent pure function, so the output is bit-identical for any thread count.
+//! independent pure function, so the output is bit-identical for any thread count. Within a
+//! chunk, blocks of 16 Gaussians run the geometry (forward and backward) as one branch-free
+//! loop over the lanes, compiled for each instruction set ([`blocks`]): every lane performs
+//! the per-Gaussian operations ([`project_geom`], [`geom_core`], [`backward_geom`]), so every
+//! path gives the same bits.
 
 #![allow(clippy::needless_range_loop)] // small fixed-size matrix loops read best indexed
 
@@ -46,12 +50,16 @@ use crate::gaussians::rirf;
 use crate::gaussians::Gaussians;
 use crate::geometry::{Camera, Mode};
 use crate::math::activations::{sigmoid, sigmoid_grad_from_output};
-use crate::math::covariance::{covariance, covariance_vjp, CovParts};
-use crate::math::inverse2::{sym2_inverse, sym2_inverse_vjp};
+use crate::math::covariance::{covariance_scaled, covariance_vjp, CovParts};
+use crate::math::inverse2::{sym2_inverse_unchecked, sym2_inverse_vjp};
+use crate::math::quat::normalize_unchecked;
 use crate::math::round;
 use crate::math::{mat3_cast, mat3_t_vec, mat3_vec, Mat3};
 use crate::par::CHUNK;
 use crate::real::Real;
+use crate::simd::Simd;
+
+mod blocks;
 
 /// 3DGS near plane: Gaussians with camera-space depth z <= NEAR are culled.
 pub const NEAR: f64 = 0.2;
@@ -161,36 +169,41 @@ pub fn project_geom<R: Real>(
     log_scale: [R; 3],
     quat: [R; 4],
 ) -> (std::result::Result<Geom<R>, Cull>, R) {
-    geom::<R, true>(cam, mean, log_scale, quat)
+    let scale = [log_scale[0].exp(), log_scale[1].exp(), log_scale[2].exp()];
+    let (geo, cull) = if cam.parallel {
+        geom_core::<R, true, true>(cam, mean, scale, quat)
+    } else {
+        geom_core::<R, true, false>(cam, mean, scale, quat)
+    };
+    let depth = geo.t[2];
+    (cull.map_or(Ok(geo), Err), depth)
 }
 
-/// [`project_geom`] with `SCREEN` false stops at Sigma2D, all the backward needs of a Gaussian
-/// the forward drew: no conic, radius or off-image test (`conic` and `radius` are left 0, and
-/// only the zero-quaternion and near-plane culls apply).
+/// [`project_geom`] from exp(log_scale), without a branch (so that loops over Gaussians
+/// vectorise): every field is computed, and the first cull that applies is returned beside
+/// them (`None`: drawn; the fields are meaningless past a cull). `PARALLEL` must be
+/// `cam.parallel`. With `SCREEN` false it stops at Sigma2D, all the backward needs of a
+/// Gaussian the forward drew: no conic, radius or off-image test (`conic` and `radius` are left
+/// 0, and only the zero-quaternion and near-plane culls apply).
 #[inline(always)]
-fn geom<R: Real, const SCREEN: bool>(
+pub(crate) fn geom_core<R: Real, const SCREEN: bool, const PARALLEL: bool>(
     cam: &CamConsts<R>,
     mean: [R; 3],
-    log_scale: [R; 3],
+    scale: [R; 3],
     quat: [R; 4],
-) -> (std::result::Result<Geom<R>, Cull>, R) {
+) -> (Geom<R>, Option<Cull>) {
     let d = [
         mean[0] - cam.centre[0],
         mean[1] - cam.centre[1],
         mean[2] - cam.centre[2],
     ];
     let t = mat3_vec(&cam.rot, d);
-    let depth = t[2];
-    let Some((sigma, cov)) = covariance(log_scale, quat) else {
-        return (Err(Cull::ZeroQuaternion), depth);
-    };
+    let (quat_ok, norm, qn) = normalize_unchecked(quat);
+    let (sigma, cov) = covariance_scaled(norm, qn, scale);
     // Positive phrasing so that NaN fails.
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
-    if !(t[2] > R::c(NEAR)) {
-        return (Err(Cull::Near), depth);
-    }
+    let near_ok = t[2] > R::c(NEAR);
     let zero = R::zero();
-    let (j, clamped, mean2d) = if cam.parallel {
+    let (j, clamped, mean2d) = if PARALLEL {
         (
             [[cam.fx, zero, zero], [zero, cam.fy, zero]],
             [false, false],
@@ -227,53 +240,46 @@ fn geom<R: Real, const SCREEN: bool>(
     let a = tm[0][0] * s0[0] + tm[0][1] * s0[1] + tm[0][2] * s0[2] + dil;
     let b = tm[0][0] * s1[0] + tm[0][1] * s1[1] + tm[0][2] * s1[2];
     let c = tm[1][0] * s1[0] + tm[1][1] * s1[1] + tm[1][2] * s1[2] + dil;
-    if !SCREEN {
-        let geo = Geom {
-            cov,
-            sigma,
-            t,
-            tm,
-            clamped,
-            cov2d: [a, b, c],
-            conic: [zero; 3],
-            mean2d,
-            radius: 0,
-        };
-        return (Ok(geo), depth);
-    }
-    let Some(conic) = sym2_inverse(a, b, c) else {
-        return (Err(Cull::Degenerate), depth);
+    let mut geo = Geom {
+        cov,
+        sigma,
+        t,
+        tm,
+        clamped,
+        cov2d: [a, b, c],
+        conic: [zero; 3],
+        mean2d,
+        radius: 0,
     };
-    if !conic.iter().all(|v| v.is_finite()) {
-        return (Err(Cull::Degenerate), depth);
+    let cull = if !quat_ok {
+        Some(Cull::ZeroQuaternion)
+    } else if !near_ok {
+        Some(Cull::Near)
+    } else {
+        None
+    };
+    if !SCREEN {
+        return (geo, cull);
     }
+    let (det_ok, conic) = sym2_inverse_unchecked(a, b, c);
+    let conic_ok = conic[0].is_finite() & conic[1].is_finite() & conic[2].is_finite();
     // 3DGS radius (f64 so that f32 and f64 agree except at exact integer boundaries).
     let (af, bf, cf) = (a.f64(), b.f64(), c.f64());
     let det = af * cf - bf * bf;
     let mid = 0.5 * (af + cf);
     let lmax = mid + (mid * mid - det).max(DISCRIMINANT_FLOOR).sqrt();
     let rf = round::ceil(RADIUS_SIGMAS * lmax.sqrt());
-    if !(rf.is_finite() && rf >= 1.0 && rf < u32::MAX as f64) {
-        return (Err(Cull::Degenerate), depth);
-    }
+    let radius_ok = rf.is_finite() & (rf >= 1.0) & (rf < u32::MAX as f64);
     let (u, v) = (mean2d[0].f64(), mean2d[1].f64());
-    if !(u + rf > 0.0 && u - rf < cam.width && v + rf > 0.0 && v - rf < cam.height) {
-        return (Err(Cull::OffImage), depth);
-    }
-    (
-        Ok(Geom {
-            cov,
-            sigma,
-            t,
-            tm,
-            clamped,
-            cov2d: [a, b, c],
-            conic,
-            mean2d,
-            radius: rf as u32,
-        }),
-        depth,
-    )
+    let on_image = (u + rf > 0.0) & (u - rf < cam.width) & (v + rf > 0.0) & (v - rf < cam.height);
+    geo.conic = conic;
+    geo.radius = rf as u32;
+    let cull = match cull {
+        None if !(det_ok & conic_ok & radius_ok) => Some(Cull::Degenerate),
+        None if !on_image => Some(Cull::OffImage),
+        c => c,
+    };
+    (geo, cull)
 }
 
 /// Intensity of one Gaussian: Eq. (2) (both RIRF variants) or SH colour (direction from the
@@ -392,10 +398,20 @@ pub fn forward<R: Real>(
     cam: &Camera,
     settings: &RenderSettings,
 ) -> Result<(Splats<R>, ProjectSaved<R>)> {
+    forward_with(Simd::active(), g, cam, settings)
+}
+
+/// [`forward`] with the loops compiled for `simd` (or the widest supported narrower set): the
+/// same bits on every path.
+pub(crate) fn forward_with<R: Real>(
+    simd: Simd,
+    g: &Gaussians<R>,
+    cam: &Camera,
+    settings: &RenderSettings,
+) -> Result<(Splats<R>, ProjectSaved<R>)> {
     check_inputs(g, settings)?;
     let n = g.len();
     let cc = CamConsts::<R>::new(cam);
-    let (mode, active) = (settings.color, settings.active_features);
     let z = R::zero();
     let mut s = Splats {
         mean2d: vec![[z; 2]; n],
@@ -414,19 +430,15 @@ pub fn forward<R: Real>(
         .zip(s.color.par_chunks_mut(CHUNK))
         .enumerate()
         .for_each(|(ci, (((((m2, co), de), ra), op), cl))| {
-            let base = ci * CHUNK;
-            for k in 0..m2.len() {
-                let i = base + k;
-                let (geo, depth) = project_geom(&cc, g.means[i], g.log_scales[i], g.quats[i]);
-                de[k] = depth;
-                if let Ok(geo) = geo {
-                    m2[k] = geo.mean2d;
-                    co[k] = geo.conic;
-                    ra[k] = geo.radius;
-                    op[k] = sigmoid(g.opacity_logits[i]);
-                    cl[k] = intensity(mode, active, cc.centre, g.means[i], &g.features[i]);
-                }
-            }
+            let out = blocks::SplatsOut {
+                mean2d: m2,
+                conic: co,
+                depth: de,
+                radius: ra,
+                opacity: op,
+                color: cl,
+            };
+            blocks::forward_chunk(simd, &cc, settings, g, ci * CHUNK, out);
         });
     let saved = ProjectSaved {
         visible: s.radius.iter().map(|&r| r > 0).collect(),
@@ -435,31 +447,41 @@ pub fn forward<R: Real>(
     Ok((s, saved))
 }
 
-/// Parameter gradients of one visible Gaussian.
-#[allow(clippy::type_complexity, clippy::too_many_arguments)]
+/// Gradients of the opacity and the intensity of one visible Gaussian: (d mean from the SH
+/// direction, d opacity logit, d features).
 #[inline(always)]
-fn backward_one<R: Real>(
+fn backward_appearance<R: Real>(
     cc: &CamConsts<R>,
     settings: &RenderSettings,
-    geo: &Geom<R>,
     mean: [R; 3],
     logit: R,
     f: &[R; N_FEATURES],
-    gm: [R; 2],
-    gc: [R; 3],
     go: R,
     gi: R,
-) -> ([R; 3], [R; 3], [R; 4], R, [R; N_FEATURES]) {
-    let zero = R::zero();
-    let two = R::c(2.0);
-    let half = R::c(0.5);
+) -> ([R; 3], R, [R; N_FEATURES]) {
     // Opacity.
     let o = sigmoid(logit);
     let dlogit = go * sigmoid_grad_from_output(o);
     // Intensity.
     let (mode, active) = (settings.color, settings.active_features);
     let value = intensity(mode, active, cc.centre, mean, f);
-    let (mut dmean, dfeat) = intensity_vjp(mode, active, cc.centre, mean, f, value, gi);
+    let (dmean, dfeat) = intensity_vjp(mode, active, cc.centre, mean, f, value, gi);
+    (dmean, dlogit, dfeat)
+}
+
+/// Gradients of the geometry of one visible Gaussian (Eqs. 1 and 3) from d mean2d and d conic:
+/// (d mean, d log_scale, d quaternion). Branch-free, like [`geom_core`]; `PARALLEL` must be
+/// `cc.parallel`.
+#[inline(always)]
+pub(crate) fn backward_geom<R: Real, const PARALLEL: bool>(
+    cc: &CamConsts<R>,
+    geo: &Geom<R>,
+    gm: [R; 2],
+    gc: [R; 3],
+) -> ([R; 3], [R; 3], [R; 4]) {
+    let zero = R::zero();
+    let two = R::c(2.0);
+    let half = R::c(0.5);
     // Conic -> Sigma2D (a, b, c); the dilation passes the gradient through unchanged.
     let [a, b, c] = geo.cov2d;
     let [da, db, dc] = sym2_inverse_vjp(a, b, c, gc);
@@ -467,9 +489,12 @@ fn backward_one<R: Real>(
     let g2 = [[da, half * db], [half * db, dc]];
     let tm = &geo.tm;
     // dSigma = T^T G2 T (3x3, symmetric); u_r = (G2 T) row r.
-    let gt: [[R; 3]; 2] = std::array::from_fn(|r| {
-        std::array::from_fn(|col| g2[r][0] * tm[0][col] + g2[r][1] * tm[1][col])
-    });
+    let mut gt = [[zero; 3]; 2];
+    for r in 0..2 {
+        for col in 0..3 {
+            gt[r][col] = g2[r][0] * tm[0][col] + g2[r][1] * tm[1][col];
+        }
+    }
     let mut dsig = [[zero; 3]; 3];
     for i in 0..3 {
         for j in 0..3 {
@@ -480,16 +505,16 @@ fn backward_one<R: Real>(
     // Mean: dt from the projection of the mean and from J(t).
     let t = geo.t;
     let mut dt = [zero; 3];
-    if cc.parallel {
+    if PARALLEL {
         dt[0] = cc.fx * gm[0];
         dt[1] = cc.fy * gm[1];
     } else {
         // dT = 2 G2 T Sigma; dJ = dT W^T.
-        let dtm: [[R; 3]; 2] = std::array::from_fn(|r| {
+        let mut dj = [[zero; 3]; 2];
+        for r in 0..2 {
             let v = mat3_t_vec(&geo.sigma, gt[r]); // Sigma symmetric: (G2 T Sigma) row r
-            [two * v[0], two * v[1], two * v[2]]
-        });
-        let dj: [[R; 3]; 2] = std::array::from_fn(|r| mat3_vec(&cc.rot, dtm[r]));
+            dj[r] = mat3_vec(&cc.rot, [two * v[0], two * v[1], two * v[2]]);
+        }
         let (x, y, z) = (t[0], t[1], t[2]);
         let iz = R::one() / z;
         let iz2 = iz * iz;
@@ -500,29 +525,28 @@ fn backward_one<R: Real>(
         dt[2] -= (cc.fx * x * gm[0] + cc.fy * y * gm[1]) * iz2;
         // J00 = fx/z, J11 = fy/z.
         dt[2] -= (cc.fx * dj[0][0] + cc.fy * dj[1][1]) * iz2;
-        // J02 = -fx x~/z^2 with x~ = x (free) or lim z (clamped).
-        if geo.clamped[0] {
-            // J02 = -fx lim/z: dJ02/dz = fx lim/z^2 = fx x~/z^3, dJ02/dx = 0.
-            let xc = x.max(-cc.lim_x * z).min(cc.lim_x * z);
-            dt[2] += cc.fx * xc * iz3 * dj[0][2];
+        // J02 = -fx x~/z^2 with x~ = x (free) or lim z (clamped). Clamped: J02 = -fx lim/z,
+        // dJ02/dz = fx lim/z^2 = fx x~/z^3, dJ02/dx = 0. Both cases are computed and one is
+        // kept, so the loops over Gaussians stay branch-free.
+        let xc = x.max(-cc.lim_x * z).min(cc.lim_x * z);
+        let (dt0, dt2) = (dt[0] - cc.fx * iz2 * dj[0][2], dt[2]);
+        dt[2] = if geo.clamped[0] {
+            dt2 + cc.fx * xc * iz3 * dj[0][2]
         } else {
-            dt[0] -= cc.fx * iz2 * dj[0][2];
-            dt[2] += two * cc.fx * x * iz3 * dj[0][2];
-        }
-        if geo.clamped[1] {
-            let yc = y.max(-cc.lim_y * z).min(cc.lim_y * z);
-            dt[2] += cc.fy * yc * iz3 * dj[1][2];
+            dt2 + two * cc.fx * x * iz3 * dj[0][2]
+        };
+        dt[0] = if geo.clamped[0] { dt[0] } else { dt0 };
+        let yc = y.max(-cc.lim_y * z).min(cc.lim_y * z);
+        let (dt1, dt2) = (dt[1] - cc.fy * iz2 * dj[1][2], dt[2]);
+        dt[2] = if geo.clamped[1] {
+            dt2 + cc.fy * yc * iz3 * dj[1][2]
         } else {
-            dt[1] -= cc.fy * iz2 * dj[1][2];
-            dt[2] += two * cc.fy * y * iz3 * dj[1][2];
-        }
+            dt2 + two * cc.fy * y * iz3 * dj[1][2]
+        };
+        dt[1] = if geo.clamped[1] { dt[1] } else { dt1 };
     }
     // t = W (mu - c): dmu = W^T dt.
-    let dmu = mat3_t_vec(&cc.rot, dt);
-    for a in 0..3 {
-        dmean[a] += dmu[a];
-    }
-    (dmean, dls, dq, dlogit, dfeat)
+    (mat3_t_vec(&cc.rot, dt), dls, dq)
 }
 
 /// Vector-Jacobian product of [`forward`]: splat gradients to parameter gradients (same layout
@@ -535,10 +559,22 @@ pub fn backward<R: Real>(
     saved: &ProjectSaved<R>,
     d: &SplatGrads<R>,
 ) -> Gaussians<R> {
+    backward_with(Simd::active(), g, cam, settings, saved, d)
+}
+
+/// [`backward`] with the loops compiled for `simd` (or the widest supported narrower set): the
+/// same bits on every path.
+pub(crate) fn backward_with<R: Real>(
+    simd: Simd,
+    g: &Gaussians<R>,
+    cam: &Camera,
+    settings: &RenderSettings,
+    saved: &ProjectSaved<R>,
+    d: &SplatGrads<R>,
+) -> Gaussians<R> {
     let n = g.len();
     let mut out = Gaussians::<R>::zeros(n);
     let cc = CamConsts::<R>::new(cam);
-    let z = R::zero();
     out.means
         .par_chunks_mut(CHUNK)
         .zip(out.log_scales.par_chunks_mut(CHUNK))
@@ -547,35 +583,14 @@ pub fn backward<R: Real>(
         .zip(out.features.par_chunks_mut(CHUNK))
         .enumerate()
         .for_each(|(ci, ((((dm, dls), dq), dlo), df))| {
-            let base = ci * CHUNK;
-            for k in 0..dm.len() {
-                let i = base + k;
-                if !saved.visible.get(i).copied().unwrap_or(false) {
-                    continue;
-                }
-                // Visible: the forward's screen-space tests passed on the same inputs.
-                let (Ok(geo), _) = geom::<R, false>(&cc, g.means[i], g.log_scales[i], g.quats[i])
-                else {
-                    continue;
-                };
-                let r = backward_one(
-                    &cc,
-                    settings,
-                    &geo,
-                    g.means[i],
-                    g.opacity_logits[i],
-                    &g.features[i],
-                    d.mean2d.get(i).copied().unwrap_or([z; 2]),
-                    d.conic.get(i).copied().unwrap_or([z; 3]),
-                    d.opacity.get(i).copied().unwrap_or(z),
-                    d.color.get(i).copied().unwrap_or(z),
-                );
-                dm[k] = r.0;
-                dls[k] = r.1;
-                dq[k] = r.2;
-                dlo[k] = r.3;
-                df[k] = r.4;
-            }
+            let out = blocks::ParamsOut {
+                means: dm,
+                log_scales: dls,
+                quats: dq,
+                opacity_logits: dlo,
+                features: df,
+            };
+            blocks::backward_chunk(simd, &cc, settings, g, saved, d, ci * CHUNK, out);
         });
     out
 }

@@ -442,3 +442,138 @@ fn projection_of_100k_gaussians_is_fast() {
     // Generous bound (shared CI machines); typical figures are in paper_notes.md.
     assert!(t_fwd.as_secs_f64() < 0.5 && t_bwd.as_secs_f64() < 0.5);
 }
+
+/// The forward and backward Gaussian by Gaussian, through the per-Gaussian functions (what the
+/// block loops must reproduce bit for bit): splat fields then parameter gradients, as bits.
+fn per_gaussian_bits<R: Real>(
+    g: &Gaussians<R>,
+    cam: &Camera,
+    st: &RenderSettings,
+    d: &SplatGrads<R>,
+) -> Vec<u64> {
+    let cc = CamConsts::<R>::new(cam);
+    let (mode, active) = (st.color, st.active_features);
+    let z = R::zero();
+    let n = g.len();
+    let mut s = Splats {
+        mean2d: vec![[z; 2]; n],
+        conic: vec![[z; 3]; n],
+        depth: vec![z; n],
+        radius: vec![0u32; n],
+        opacity: vec![z; n],
+        color: vec![z; n],
+    };
+    let mut gr = Gaussians::<R>::zeros(n);
+    for i in 0..n {
+        let (geo, depth) = project_geom(&cc, g.means[i], g.log_scales[i], g.quats[i]);
+        s.depth[i] = depth;
+        let Ok(geo) = geo else { continue };
+        s.mean2d[i] = geo.mean2d;
+        s.conic[i] = geo.conic;
+        s.radius[i] = geo.radius;
+        s.opacity[i] = sigmoid(g.opacity_logits[i]);
+        s.color[i] = intensity(mode, active, cc.centre, g.means[i], &g.features[i]);
+        let gm = d.mean2d.get(i).copied().unwrap_or([z; 2]);
+        let gc = d.conic.get(i).copied().unwrap_or([z; 3]);
+        let (dmu, dls, dq) = if cc.parallel {
+            backward_geom::<R, true>(&cc, &geo, gm, gc)
+        } else {
+            backward_geom::<R, false>(&cc, &geo, gm, gc)
+        };
+        let (dmean, dlogit, dfeat) = backward_appearance(
+            &cc,
+            st,
+            g.means[i],
+            g.opacity_logits[i],
+            &g.features[i],
+            d.opacity.get(i).copied().unwrap_or(z),
+            d.color.get(i).copied().unwrap_or(z),
+        );
+        gr.means[i] = std::array::from_fn(|a| dmean[a] + dmu[a]);
+        gr.log_scales[i] = dls;
+        gr.quats[i] = dq;
+        gr.opacity_logits[i] = dlogit;
+        gr.features[i] = dfeat;
+    }
+    result_bits(&s, &gr)
+}
+
+fn result_bits<R: Real>(s: &Splats<R>, gr: &Gaussians<R>) -> Vec<u64> {
+    let b = |x: &R| x.f64().to_bits();
+    let mut v: Vec<u64> = s.mean2d.iter().flatten().map(b).collect();
+    v.extend(s.conic.iter().flatten().map(b));
+    v.extend(s.depth.iter().map(b));
+    v.extend(s.radius.iter().map(|&r| r as u64));
+    v.extend(s.opacity.iter().map(b));
+    v.extend(s.color.iter().map(b));
+    v.extend(gr.means.iter().flatten().map(b));
+    v.extend(gr.log_scales.iter().flatten().map(b));
+    v.extend(gr.quats.iter().flatten().map(b));
+    v.extend(gr.opacity_logits.iter().map(b));
+    v.extend(gr.features.iter().flatten().map(b));
+    v
+}
+
+#[test]
+fn every_simd_path_projects_alike_and_as_the_per_gaussian_code() {
+    println!("paths supported: {:?}", Simd::supported_paths());
+    // Not a multiple of the block or the chunk: tails of both. Every cull and the clamp.
+    let n = 2 * CHUNK + 37;
+    for mode in [Mode::Cone, Mode::Parallel] {
+        let cam = geo(mode, [4.5, -3.0]).camera(0.7);
+        let mut g = scene(n, 41);
+        let mut rng = ChaCha8Rng::seed_from_u64(42);
+        for i in 0..n {
+            match rng.random_range(0..12) {
+                0 => g.quats[i] = [0.0; 4],
+                1 => g.means[i] = at_cam(&cam, [0.0, 0.0, -50.0]),
+                2 => g.means[i] = at_cam(&cam, [3.0, -2.0, 0.1]),
+                3 => g.means[i] = at_cam(&cam, [500.0, 0.0, 1000.0]),
+                4 => g.log_scales[i] = [800.0, 0.0, 0.0],
+                5 => g.log_scales[i] = [-100.0; 3],
+                // Near the image edge, past the Jacobian clamp with a wide splat.
+                6 => {
+                    g.means[i] = at_cam(&cam, [rng.random_range(60.0..80.0), 5.0, 60.0]);
+                    g.log_scales[i] = [4.0, 3.0, 2.0];
+                }
+                _ => {}
+            }
+        }
+        for (color, active) in [
+            (ColorMode::RirfPaper, 16),
+            (ColorMode::RirfXgaussian, 4),
+            (ColorMode::Sh, 9),
+        ] {
+            let st = settings(color, active);
+            // Splat gradients shorter than the model: the last Gaussians read zero.
+            let mut d = random_grads(n, 43);
+            d.conic.truncate(n - 5);
+            d.color.truncate(n - 20);
+            let d32 = SplatGrads {
+                mean2d: d.mean2d.iter().map(|a| a.map(|x| x as f32)).collect(),
+                conic: d.conic.iter().map(|a| a.map(|x| x as f32)).collect(),
+                opacity: d.opacity.iter().map(|&x| x as f32).collect(),
+                color: d.color.iter().map(|&x| x as f32).collect(),
+            };
+            let g32 = g.cast::<f32>();
+            let want64 = per_gaussian_bits(&g, &cam, &st, &d);
+            let want32 = per_gaussian_bits(&g32, &cam, &st, &d32);
+            let culled = (0..n).filter(|&i| want64[4 * n + i] == 0).count();
+            assert!(culled > n / 3 && culled < n * 2 / 3, "{culled} culled");
+            for p in Simd::ALL {
+                let (s, sv) = forward_with(p, &g, &cam, &st).unwrap();
+                let gr = backward_with(p, &g, &cam, &st, &sv, &d);
+                assert!(
+                    result_bits(&s, &gr) == want64,
+                    "{p:?} {mode:?} {color:?} f64"
+                );
+                let (s, sv) = forward_with(p, &g32, &cam, &st).unwrap();
+                let gr = backward_with(p, &g32, &cam, &st, &sv, &d32);
+                assert!(
+                    result_bits(&s, &gr) == want32,
+                    "{p:?} {mode:?} {color:?} f32"
+                );
+            }
+        }
+    }
+}
