@@ -30,7 +30,8 @@
 //! normalisation VJP, the full conic VJP (no 1e-7 regulariser), the zero derivative through a
 //! clamped coordinate of J and its exact z-term (3DGS is a factor 2 off there), the mean
 //! projection, and the SH direction (gradient into the mean). Everything is recomputed from the
-//! parameters (cheap, no per-Gaussian storage); `ProjectSaved` keeps the visibility mask.
+//! parameters except exp(log_scale), the opacity and the intensity, which `ProjectSaved` keeps
+//! with the visibility mask.
 //!
 //! Parallelism: rayon over fixed chunks of `par::CHUNK` Gaussians; each Gaussian is an
 //! independent pure function, so the output is bit-identical for any thread count. Within a
@@ -49,7 +50,7 @@ use crate::gaussians::model::N_FEATURES;
 use crate::gaussians::rirf;
 use crate::gaussians::Gaussians;
 use crate::geometry::{Camera, Mode};
-use crate::math::activations::{sigmoid, sigmoid_grad_from_output};
+use crate::math::activations::sigmoid_grad_from_output;
 use crate::math::covariance::{covariance_scaled, covariance_vjp, CovParts};
 use crate::math::inverse2::{sym2_inverse_unchecked, sym2_inverse_vjp};
 use crate::math::quat::normalize_unchecked;
@@ -77,7 +78,12 @@ pub const DISCRIMINANT_FLOOR: f64 = 0.1;
 pub struct ProjectSaved<R: Real> {
     /// Gaussian i was drawn (radius > 0). Backward gives zero gradient to the others.
     pub visible: Vec<bool>,
-    _p: std::marker::PhantomData<R>,
+    /// What the drawn Gaussians' gradients need that costs C library exponentials to
+    /// recompute (five per Gaussian), kept instead (0 for the others): exp(log_scale) (Eq. 1),
+    /// the opacity and the intensity (the splats' `opacity` and `color`).
+    pub scale: Vec<[R; 3]>,
+    pub opacity: Vec<R>,
+    pub intensity: Vec<R>,
 }
 
 /// Camera constants in precision `R`.
@@ -421,6 +427,7 @@ pub(crate) fn forward_with<R: Real>(
         opacity: vec![z; n],
         color: vec![z; n],
     };
+    let mut scale = vec![[z; 3]; n];
     s.mean2d
         .par_chunks_mut(CHUNK)
         .zip(s.conic.par_chunks_mut(CHUNK))
@@ -428,8 +435,9 @@ pub(crate) fn forward_with<R: Real>(
         .zip(s.radius.par_chunks_mut(CHUNK))
         .zip(s.opacity.par_chunks_mut(CHUNK))
         .zip(s.color.par_chunks_mut(CHUNK))
+        .zip(scale.par_chunks_mut(CHUNK))
         .enumerate()
-        .for_each(|(ci, (((((m2, co), de), ra), op), cl))| {
+        .for_each(|(ci, ((((((m2, co), de), ra), op), cl), sc))| {
             let out = blocks::SplatsOut {
                 mean2d: m2,
                 conic: co,
@@ -437,34 +445,35 @@ pub(crate) fn forward_with<R: Real>(
                 radius: ra,
                 opacity: op,
                 color: cl,
+                scale: sc,
             };
             blocks::forward_chunk(simd, &cc, settings, g, ci * CHUNK, out);
         });
     let saved = ProjectSaved {
         visible: s.radius.iter().map(|&r| r > 0).collect(),
-        _p: std::marker::PhantomData,
+        scale,
+        opacity: s.opacity.clone(),
+        intensity: s.color.clone(),
     };
     Ok((s, saved))
 }
 
-/// Gradients of the opacity and the intensity of one visible Gaussian: (d mean from the SH
-/// direction, d opacity logit, d features).
+/// Gradients of the opacity `o` and the intensity `value` of one visible Gaussian (their
+/// forward values given): (d mean from the SH direction, d opacity logit, d features).
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn backward_appearance<R: Real>(
     cc: &CamConsts<R>,
     settings: &RenderSettings,
     mean: [R; 3],
-    logit: R,
     f: &[R; N_FEATURES],
+    o: R,
+    value: R,
     go: R,
     gi: R,
 ) -> ([R; 3], R, [R; N_FEATURES]) {
-    // Opacity.
-    let o = sigmoid(logit);
     let dlogit = go * sigmoid_grad_from_output(o);
-    // Intensity.
     let (mode, active) = (settings.color, settings.active_features);
-    let value = intensity(mode, active, cc.centre, mean, f);
     let (dmean, dfeat) = intensity_vjp(mode, active, cc.centre, mean, f, value, gi);
     (dmean, dlogit, dfeat)
 }

@@ -3,12 +3,13 @@
 //!
 //! A block is [`LANES`] consecutive Gaussians of a chunk. Per block, in three loops:
 //! 1. Gaussian by Gaussian, the inputs are copied into one array per component, with the C
-//!    library's exponentials of the scales (Eq. 1);
+//!    library's exponentials of the scales (Eq. 1; the backward reads the forward's);
 //! 2. one loop over the lanes runs the geometry ([`geom_core`], and in the backward
 //!    [`backward_geom`]): branch-free, so the compiler vectorises it (the lanes past the
 //!    chunk's end hold a zero quaternion and are culled);
 //! 3. Gaussian by Gaussian again, the drawn ones get their opacity and intensity (Eq. 2; C
-//!    library exponentials, SH directions) or their gradients, and the results are written.
+//!    library exponentials, SH directions) or their gradients (from the forward's opacity and
+//!    intensity), and the results are written.
 //!
 //! Every lane calls the per-Gaussian functions with the same inputs, so every path gives the
 //! bits of the per-Gaussian code ([`super::project_geom`]); `every_simd_path_projects_alike`
@@ -33,6 +34,8 @@ pub(super) struct SplatsOut<'a, R: Real> {
     pub radius: &'a mut [u32],
     pub opacity: &'a mut [R],
     pub color: &'a mut [R],
+    /// exp(log_scale) of the drawn Gaussians, for the backward ([`ProjectSaved::scale`]).
+    pub scale: &'a mut [[R; 3]],
 }
 
 /// A chunk's share of the parameter gradients (the backward's output, zero on entry).
@@ -62,12 +65,12 @@ impl<R: Real> BlockIn<R> {
         }
     }
 
-    /// Lane `l` takes Gaussian `i` of `g`, with exp(log_scale) (Eq. 1).
+    /// Lane `l` takes Gaussian `i` of `g`, with its exp(log_scale) `scale` (Eq. 1).
     #[inline(always)]
-    fn load(&mut self, l: usize, g: &Gaussians<R>, i: usize) {
+    fn load(&mut self, l: usize, g: &Gaussians<R>, i: usize, scale: [R; 3]) {
         for a in 0..3 {
             self.mean[a][l] = g.means[i][a];
-            self.scale[a][l] = g.log_scales[i][a].exp();
+            self.scale[a][l] = scale[a];
         }
         for a in 0..4 {
             self.quat[a][l] = g.quats[i][a];
@@ -147,7 +150,9 @@ fn forward_blocks<R: Real, const PARALLEL: bool>(
         let m = LANES.min(n - k0);
         let mut inp = BlockIn::<R>::zeros();
         for l in 0..m {
-            inp.load(l, g, base + k0 + l);
+            let i = base + k0 + l;
+            let ls = g.log_scales[i];
+            inp.load(l, g, i, [ls[0].exp(), ls[1].exp(), ls[2].exp()]);
         }
         // Eqs. (1) and (3), lane by lane (vectorised).
         let z = [R::zero(); LANES];
@@ -175,6 +180,7 @@ fn forward_blocks<R: Real, const PARALLEL: bool>(
             out.mean2d[k] = [mean2d[0][l], mean2d[1][l]];
             out.conic[k] = [conic[0][l], conic[1][l], conic[2][l]];
             out.radius[k] = radius[l];
+            out.scale[k] = inp.lane(l).1;
             out.opacity[k] = sigmoid(g.opacity_logits[i]);
             out.color[k] = intensity(mode, active, cc.centre, g.means[i], &g.features[i]);
         }
@@ -259,7 +265,7 @@ fn backward_blocks<R: Real, const PARALLEL: bool>(
             if !saved.visible.get(i).copied().unwrap_or(false) {
                 continue;
             }
-            inp.load(l, g, i);
+            inp.load(l, g, i, saved.scale[i]);
             let dm = d.mean2d.get(i).copied().unwrap_or([zero; 2]);
             let dc = d.conic.get(i).copied().unwrap_or([zero; 3]);
             for a in 0..2 {
@@ -300,8 +306,9 @@ fn backward_blocks<R: Real, const PARALLEL: bool>(
                 cc,
                 settings,
                 g.means[i],
-                g.opacity_logits[i],
                 &g.features[i],
+                saved.opacity[i],
+                saved.intensity[i],
                 d.opacity.get(i).copied().unwrap_or(zero),
                 d.color.get(i).copied().unwrap_or(zero),
             );

@@ -7,6 +7,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::*;
 use crate::geometry::ConeBeam;
+use crate::math::activations::sigmoid;
 use crate::math::fd;
 
 pub(crate) fn geo(mode: Mode, off: [f64; 2]) -> ConeBeam {
@@ -484,8 +485,9 @@ fn per_gaussian_bits<R: Real>(
             &cc,
             st,
             g.means[i],
-            g.opacity_logits[i],
             &g.features[i],
+            s.opacity[i],
+            s.color[i],
             d.opacity.get(i).copied().unwrap_or(z),
             d.color.get(i).copied().unwrap_or(z),
         );
