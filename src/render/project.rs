@@ -36,9 +36,9 @@
 //! Parallelism: rayon over fixed chunks of `par::CHUNK` Gaussians; each Gaussian is an
 //! independent pure function, so the output is bit-identical for any thread count. Within a
 //! chunk, blocks of 16 Gaussians run the geometry (forward and backward) as one branch-free
-//! loop over the lanes, compiled for each instruction set ([`blocks`]): every lane performs
-//! the per-Gaussian operations ([`project_geom`], [`geom_core`], [`backward_geom`]), so every
-//! path gives the same bits.
+//! loop over the lanes, compiled for each instruction set (`project/blocks.rs`): every lane
+//! performs the per-Gaussian operations ([`project_geom`], `geom_core`, `backward_geom`), so
+//! every path gives the same bits.
 
 #![allow(clippy::needless_range_loop)] // small fixed-size matrix loops read best indexed
 
