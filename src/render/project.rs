@@ -447,7 +447,14 @@ pub(crate) fn forward_with<R: Real>(
                 color: cl,
                 scale: sc,
             };
-            blocks::forward_chunk(simd, &cc, settings, g, ci * CHUNK, out);
+            blocks::run_chunk(
+                simd,
+                &cc,
+                settings,
+                g,
+                ci * CHUNK,
+                blocks::Pass::Forward(out),
+            );
         });
     let saved = ProjectSaved {
         visible: s.radius.iter().map(|&r| r > 0).collect(),
@@ -599,7 +606,8 @@ pub(crate) fn backward_with<R: Real>(
                 opacity_logits: dlo,
                 features: df,
             };
-            blocks::backward_chunk(simd, &cc, settings, g, saved, d, ci * CHUNK, out);
+            let pass = blocks::Pass::Backward { saved, d, out };
+            blocks::run_chunk(simd, &cc, settings, g, ci * CHUNK, pass);
         });
     out
 }

@@ -88,25 +88,38 @@ impl<R: Real> BlockIn<R> {
     }
 }
 
-/// The forward of the Gaussians `base..base + out.depth.len()` into `out` (zero on entry), with
-/// the loops compiled for `simd` (or the widest supported narrower set).
-pub(super) fn forward_chunk<R: Real>(
+/// Which pass a chunk runs, with its inputs and outputs.
+pub(super) enum Pass<'a, R: Real> {
+    /// The forward into the chunk's share of the splats (zero on entry).
+    Forward(SplatsOut<'a, R>),
+    /// The backward from the splat gradients `d` into the chunk's share of the parameter
+    /// gradients (zero on entry).
+    Backward {
+        saved: &'a ProjectSaved<R>,
+        d: &'a SplatGrads<R>,
+        out: ParamsOut<'a, R>,
+    },
+}
+
+/// `pass` over the Gaussians `base..` of one chunk (as many as its outputs hold), with the
+/// loops compiled for `simd` (or the widest supported narrower set).
+pub(super) fn run_chunk<R: Real>(
     simd: Simd,
     cc: &CamConsts<R>,
     settings: &RenderSettings,
     g: &Gaussians<R>,
     base: usize,
-    out: SplatsOut<'_, R>,
+    pass: Pass<'_, R>,
 ) {
     #[cfg(target_arch = "x86_64")]
     match simd.or_narrower() {
         // SAFETY: `or_narrower` returns a set the CPU supports.
-        Simd::Avx512 => return unsafe { forward_avx512(cc, settings, g, base, out) },
-        Simd::Avx2 => return unsafe { forward_avx2(cc, settings, g, base, out) },
+        Simd::Avx512 => return unsafe { run_avx512(cc, settings, g, base, pass) },
+        Simd::Avx2 => return unsafe { run_avx2(cc, settings, g, base, pass) },
         Simd::Scalar => {}
     }
     let _ = simd;
-    forward_any(cc, settings, g, base, out)
+    run_any(cc, settings, g, base, pass)
 }
 
 crate::simd::wide_kernels! {
@@ -115,24 +128,29 @@ crate::simd::wide_kernels! {
         settings: &RenderSettings,
         g: &Gaussians<R>,
         base: usize,
-        out: SplatsOut<'_, R>,
+        pass: Pass<'_, R>,
     );
-    forward_avx2 => { forward_any(cc, settings, g, base, out) }
-    forward_avx512 => { forward_any(cc, settings, g, base, out) }
+    run_avx2 => { run_any(cc, settings, g, base, pass) }
+    run_avx512 => { run_any(cc, settings, g, base, pass) }
 }
 
 #[inline(always)]
-fn forward_any<R: Real>(
+fn run_any<R: Real>(
     cc: &CamConsts<R>,
     settings: &RenderSettings,
     g: &Gaussians<R>,
     base: usize,
-    out: SplatsOut<'_, R>,
+    pass: Pass<'_, R>,
 ) {
-    if cc.parallel {
-        forward_blocks::<R, true>(cc, settings, g, base, out)
-    } else {
-        forward_blocks::<R, false>(cc, settings, g, base, out)
+    match (pass, cc.parallel) {
+        (Pass::Forward(out), true) => forward_blocks::<R, true>(cc, settings, g, base, out),
+        (Pass::Forward(out), false) => forward_blocks::<R, false>(cc, settings, g, base, out),
+        (Pass::Backward { saved, d, out }, true) => {
+            backward_blocks::<R, true>(cc, settings, g, saved, d, base, out)
+        }
+        (Pass::Backward { saved, d, out }, false) => {
+            backward_blocks::<R, false>(cc, settings, g, saved, d, base, out)
+        }
     }
 }
 
@@ -184,61 +202,6 @@ fn forward_blocks<R: Real, const PARALLEL: bool>(
             out.opacity[k] = sigmoid(g.opacity_logits[i]);
             out.color[k] = intensity(mode, active, cc.centre, g.means[i], &g.features[i]);
         }
-    }
-}
-
-/// The backward of the Gaussians `base..base + out.means.len()` into `out` (zero on entry),
-/// with the loops compiled for `simd` (or the widest supported narrower set).
-#[allow(clippy::too_many_arguments)]
-pub(super) fn backward_chunk<R: Real>(
-    simd: Simd,
-    cc: &CamConsts<R>,
-    settings: &RenderSettings,
-    g: &Gaussians<R>,
-    saved: &ProjectSaved<R>,
-    d: &SplatGrads<R>,
-    base: usize,
-    out: ParamsOut<'_, R>,
-) {
-    #[cfg(target_arch = "x86_64")]
-    match simd.or_narrower() {
-        // SAFETY: `or_narrower` returns a set the CPU supports.
-        Simd::Avx512 => return unsafe { backward_avx512(cc, settings, g, saved, d, base, out) },
-        Simd::Avx2 => return unsafe { backward_avx2(cc, settings, g, saved, d, base, out) },
-        Simd::Scalar => {}
-    }
-    let _ = simd;
-    backward_any(cc, settings, g, saved, d, base, out)
-}
-
-crate::simd::wide_kernels! {
-    unsafe fn [R: Real](
-        cc: &CamConsts<R>,
-        settings: &RenderSettings,
-        g: &Gaussians<R>,
-        saved: &ProjectSaved<R>,
-        d: &SplatGrads<R>,
-        base: usize,
-        out: ParamsOut<'_, R>,
-    );
-    backward_avx2 => { backward_any(cc, settings, g, saved, d, base, out) }
-    backward_avx512 => { backward_any(cc, settings, g, saved, d, base, out) }
-}
-
-#[inline(always)]
-fn backward_any<R: Real>(
-    cc: &CamConsts<R>,
-    settings: &RenderSettings,
-    g: &Gaussians<R>,
-    saved: &ProjectSaved<R>,
-    d: &SplatGrads<R>,
-    base: usize,
-    out: ParamsOut<'_, R>,
-) {
-    if cc.parallel {
-        backward_blocks::<R, true>(cc, settings, g, saved, d, base, out)
-    } else {
-        backward_blocks::<R, false>(cc, settings, g, saved, d, base, out)
     }
 }
 
