@@ -12,8 +12,9 @@
 //!    intensity), and the results are written.
 //!
 //! Every lane calls the per-Gaussian functions with the same inputs, so every path gives the
-//! bits of the per-Gaussian code ([`super::project_geom`]); `every_simd_path_projects_alike`
-//! forces each path the machine has.
+//! bits of the per-Gaussian code ([`super::project_geom`]);
+//! `every_simd_path_projects_alike_and_as_the_per_gaussian_code` forces each path the machine
+//! has and compares them with a Gaussian-by-Gaussian loop.
 
 use super::{backward_appearance, backward_geom, geom_core, intensity, CamConsts, ProjectSaved};
 use crate::gaussians::model::N_FEATURES;
