@@ -188,14 +188,14 @@ fn compute(folder: &str, inputs: &Value) -> Value {
             g.log_scales = rows::<3>(inputs, "log_scales");
             g.quats = rows::<4>(inputs, "quats");
             let settings = RenderSettings::default();
-            let (_, saved) = project::forward(&g, &cam, &settings).unwrap();
+            let (splats, saved) = project::forward(&g, &cam, &settings).unwrap();
             let d = SplatGrads {
                 mean2d: rows::<2>(inputs, "d_mean2d"),
                 conic: rows::<3>(inputs, "d_conic"),
                 opacity: vec![0.0; n],
                 color: vec![0.0; n],
             };
-            let p = project::backward(&g, &cam, &settings, &saved, &d);
+            let p = project::backward(&g, &cam, &settings, &splats, &saved, &d);
             json!({
                 "d_means": arr(&[n, 3], p.means.into_flattened()),
                 "d_log_scales": arr(&[n, 3], p.log_scales.into_flattened()),

@@ -105,7 +105,7 @@ pub fn vjp<R: Float>(
         off += px;
         // The two stages of `render::backward`, kept apart to expose the splat gradients.
         let ds = composite::backward(&saved.splats, &saved.composite, &d);
-        let dp = project::backward(g, cam, s, &saved.project, &ds);
+        let dp = project::backward(g, cam, s, &saved.splats, &saved.project, &ds);
         if cams.len() == 1 {
             v.params = dp;
         } else {
@@ -222,7 +222,7 @@ pub fn project_vjp<R: Float>(
     let n = g.len();
     let mut acc = Gaussians::zeros(n);
     for (k, cam) in cams.iter().enumerate() {
-        let (_, saved) = project::forward(g, cam, s)?;
+        let (splats, saved) = project::forward(g, cam, s)?;
         let r = k * n..(k + 1) * n;
         let d = render::SplatGrads {
             mean2d: up.means2d[r.clone()].to_vec(),
@@ -230,7 +230,7 @@ pub fn project_vjp<R: Float>(
             opacity: up.opacities[r.clone()].to_vec(),
             color: up.colors[r].to_vec(),
         };
-        let dp = project::backward(g, cam, s, &saved, &d);
+        let dp = project::backward(g, cam, s, &splats, &saved, &d);
         if cams.len() == 1 {
             acc = dp;
         } else {

@@ -153,7 +153,7 @@ fn time_phases(
         let bg = st.background as f32;
         let (img, cs) = composite::forward_probed(&splats, cam.width, cam.height, bg, &mut probe);
         let (ds, bw) = composite::backward_probed(&splats, &cs, d, &mut probe);
-        let params = render::project::backward(g, cam, st, &ps, &ds);
+        let params = render::project::backward(g, cam, st, &splats, &ps, &ds);
         marks.push(now());
         std::hint::black_box((&img, &params));
         assert_eq!(marks.len(), RENDER_PHASES.len() + 1, "one mark per phase");

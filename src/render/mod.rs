@@ -177,7 +177,7 @@ pub fn backward<R: Real>(
     d_image: &crate::image2d::Image2d<R>,
 ) -> RenderGrads<R> {
     let ds = composite::backward(&saved.splats, &saved.composite, d_image);
-    let params = project::backward(g, cam, settings, &saved.project, &ds);
+    let params = project::backward(g, cam, settings, &saved.splats, &saved.project, &ds);
     let (w, h) = (R::c(cam.width as f64), R::c(cam.height as f64));
     let half = R::c(0.5);
     let mean2d_ndc_norm = ds

@@ -30,8 +30,8 @@
 //! normalisation VJP, the full conic VJP (no 1e-7 regulariser), the zero derivative through a
 //! clamped coordinate of J and its exact z-term (3DGS is a factor 2 off there), the mean
 //! projection, and the SH direction (gradient into the mean). Everything is recomputed from the
-//! parameters except exp(log_scale), the opacity and the intensity, which `ProjectSaved` keeps
-//! with the visibility mask.
+//! parameters except what the forward's splats hold (which Gaussians were drawn, the opacity,
+//! the intensity) and exp(log_scale), which `ProjectSaved` keeps.
 //!
 //! Parallelism: rayon over fixed chunks of `par::CHUNK` Gaussians; each Gaussian is an
 //! independent pure function, so the output is bit-identical for any thread count. Within a
@@ -73,17 +73,13 @@ pub const RADIUS_SIGMAS: f64 = 3.0;
 /// 3DGS's floor on the eigenvalue discriminant mid^2 - det.
 pub const DISCRIMINANT_FLOOR: f64 = 0.1;
 
-/// What [`backward`] needs from [`forward`].
+/// What [`backward`] needs from [`forward`] besides the splats (whose radius says which
+/// Gaussians were drawn, and whose opacity and colour their gradients need).
 #[derive(Clone, Debug, Default)]
 pub struct ProjectSaved<R: Real> {
-    /// Gaussian i was drawn (radius > 0). Backward gives zero gradient to the others.
-    pub visible: Vec<bool>,
-    /// What the drawn Gaussians' gradients need that costs C library exponentials to
-    /// recompute (five per Gaussian), kept instead (0 for the others): exp(log_scale) (Eq. 1),
-    /// the opacity and the intensity (the splats' `opacity` and `color`).
+    /// exp(log_scale) (Eq. 1) of the drawn Gaussians (0 for the others): kept rather than
+    /// recomputed, three C library exponentials per Gaussian.
     pub scale: Vec<[R; 3]>,
-    pub opacity: Vec<R>,
-    pub intensity: Vec<R>,
 }
 
 /// Camera constants in precision `R`.
@@ -456,12 +452,7 @@ pub(crate) fn forward_with<R: Real>(
                 blocks::Pass::Forward(out),
             );
         });
-    let saved = ProjectSaved {
-        visible: s.radius.iter().map(|&r| r > 0).collect(),
-        scale,
-        opacity: s.opacity.clone(),
-        intensity: s.color.clone(),
-    };
+    let saved = ProjectSaved { scale };
     Ok((s, saved))
 }
 
@@ -566,16 +557,18 @@ pub(crate) fn backward_geom<R: Real, const PARALLEL: bool>(
 }
 
 /// Vector-Jacobian product of [`forward`]: splat gradients to parameter gradients (same layout
-/// as the model, pre-activation). Culled Gaussians get exactly zero. Splat-gradient vectors
-/// shorter than the model are read as zero.
+/// as the model, pre-activation), given the forward's `splats` and `saved` of the same
+/// Gaussians. Culled Gaussians get exactly zero. Splat-gradient vectors shorter than the model
+/// are read as zero.
 pub fn backward<R: Real>(
     g: &Gaussians<R>,
     cam: &Camera,
     settings: &RenderSettings,
+    splats: &Splats<R>,
     saved: &ProjectSaved<R>,
     d: &SplatGrads<R>,
 ) -> Gaussians<R> {
-    backward_with(Simd::active(), g, cam, settings, saved, d)
+    backward_with(Simd::active(), g, cam, settings, splats, saved, d)
 }
 
 /// [`backward`] with the loops compiled for `simd` (or the widest supported narrower set): the
@@ -585,6 +578,7 @@ pub(crate) fn backward_with<R: Real>(
     g: &Gaussians<R>,
     cam: &Camera,
     settings: &RenderSettings,
+    splats: &Splats<R>,
     saved: &ProjectSaved<R>,
     d: &SplatGrads<R>,
 ) -> Gaussians<R> {
@@ -606,7 +600,12 @@ pub(crate) fn backward_with<R: Real>(
                 opacity_logits: dlo,
                 features: df,
             };
-            let pass = blocks::Pass::Backward { saved, d, out };
+            let pass = blocks::Pass::Backward {
+                splats,
+                saved,
+                d,
+                out,
+            };
             blocks::run_chunk(simd, &cc, settings, g, ci * CHUNK, pass);
         });
     out

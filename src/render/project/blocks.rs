@@ -21,7 +21,7 @@ use crate::gaussians::model::N_FEATURES;
 use crate::gaussians::Gaussians;
 use crate::math::activations::sigmoid;
 use crate::real::Real;
-use crate::render::{RenderSettings, SplatGrads};
+use crate::render::{RenderSettings, SplatGrads, Splats};
 use crate::simd::Simd;
 
 /// Gaussians per block: a vector of f32 lanes with AVX-512.
@@ -96,6 +96,7 @@ pub(super) enum Pass<'a, R: Real> {
     /// The backward from the splat gradients `d` into the chunk's share of the parameter
     /// gradients (zero on entry).
     Backward {
+        splats: &'a Splats<R>,
         saved: &'a ProjectSaved<R>,
         d: &'a SplatGrads<R>,
         out: ParamsOut<'a, R>,
@@ -146,12 +147,24 @@ fn run_any<R: Real>(
     match (pass, cc.parallel) {
         (Pass::Forward(out), true) => forward_blocks::<R, true>(cc, settings, g, base, out),
         (Pass::Forward(out), false) => forward_blocks::<R, false>(cc, settings, g, base, out),
-        (Pass::Backward { saved, d, out }, true) => {
-            backward_blocks::<R, true>(cc, settings, g, saved, d, base, out)
-        }
-        (Pass::Backward { saved, d, out }, false) => {
-            backward_blocks::<R, false>(cc, settings, g, saved, d, base, out)
-        }
+        (
+            Pass::Backward {
+                splats,
+                saved,
+                d,
+                out,
+            },
+            true,
+        ) => backward_blocks::<R, true>(cc, settings, g, splats, saved, d, base, out),
+        (
+            Pass::Backward {
+                splats,
+                saved,
+                d,
+                out,
+            },
+            false,
+        ) => backward_blocks::<R, false>(cc, settings, g, splats, saved, d, base, out),
     }
 }
 
@@ -206,11 +219,13 @@ fn forward_blocks<R: Real, const PARALLEL: bool>(
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn backward_blocks<R: Real, const PARALLEL: bool>(
     cc: &CamConsts<R>,
     settings: &RenderSettings,
     g: &Gaussians<R>,
+    splats: &Splats<R>,
     saved: &ProjectSaved<R>,
     d: &SplatGrads<R>,
     base: usize,
@@ -226,7 +241,7 @@ fn backward_blocks<R: Real, const PARALLEL: bool>(
         let (mut gm, mut gc) = ([z; 2], [z; 3]);
         for l in 0..m {
             let i = base + k0 + l;
-            if !saved.visible.get(i).copied().unwrap_or(false) {
+            if splats.radius.get(i).is_none_or(|&r| r == 0) {
                 continue;
             }
             inp.load(l, g, i, saved.scale[i]);
@@ -271,8 +286,8 @@ fn backward_blocks<R: Real, const PARALLEL: bool>(
                 settings,
                 g.means[i],
                 &g.features[i],
-                saved.opacity[i],
-                saved.intensity[i],
+                splats.opacity[i],
+                splats.color[i],
                 d.opacity.get(i).copied().unwrap_or(zero),
                 d.color.get(i).copied().unwrap_or(zero),
             );

@@ -115,7 +115,7 @@ fn fd_check(g: &Gaussians<f64>, cam: &Camera, st: &RenderSettings, seed: u64) ->
         "scene has culled Gaussians"
     );
     let w = random_grads(n, seed);
-    let an = backward(g, cam, st, &saved, &w);
+    let an = backward(g, cam, st, &s0, &saved, &w);
     let x = flatten(g);
     // Steps: 1e-3 mm for means, 1e-3 for the dimensionless groups.
     let steps = vec![1e-3; x.len()];
@@ -187,8 +187,8 @@ fn fd_every_colour_mode_and_feature_count() {
             let errs = fd_check(&g, &cam, &st, active as u64);
             assert_fd(errs, &format!("{color:?} {active}"));
             // Inactive features get exactly zero gradient.
-            let (_, saved) = forward(&g, &cam, &st).unwrap();
-            let an = backward(&g, &cam, &st, &saved, &random_grads(5, 3));
+            let (s, saved) = forward(&g, &cam, &st).unwrap();
+            let an = backward(&g, &cam, &st, &s, &saved, &random_grads(5, 3));
             assert!(an
                 .features
                 .iter()
@@ -196,8 +196,8 @@ fn fd_every_colour_mode_and_feature_count() {
             if color == ColorMode::Sh && active > 1 {
                 // The SH direction moves the mean gradient: differs from the RIRF one.
                 let st2 = settings(ColorMode::RirfPaper, active);
-                let (_, sv2) = forward(&g, &cam, &st2).unwrap();
-                let an2 = backward(&g, &cam, &st2, &sv2, &random_grads(5, 3));
+                let (s2, sv2) = forward(&g, &cam, &st2).unwrap();
+                let an2 = backward(&g, &cam, &st2, &s2, &sv2, &random_grads(5, 3));
                 assert!(an.means != an2.means);
             }
         }
@@ -245,14 +245,14 @@ fn clamped_z_term_is_not_the_3dgs_one() {
     g.means[0] = at_cam(&cam, [1.6 * cc.lim_x * 1000.0, 0.0, 1000.0]);
     g.log_scales[0] = [40.0f64.ln(); 3];
     let st = settings(ColorMode::RirfPaper, 1);
-    let (_, saved) = forward(&g, &cam, &st).unwrap();
+    let (s, saved) = forward(&g, &cam, &st).unwrap();
     let w = SplatGrads {
         mean2d: vec![[0.0, 0.0]],
         conic: vec![[1e4, 0.0, 0.0]],
         opacity: vec![0.0],
         color: vec![0.0],
     };
-    let an = backward(&g, &cam, &st, &saved, &w);
+    let an = backward(&g, &cam, &st, &s, &saved, &w);
     // Derivative along the camera z axis.
     let zdir = cam.cam_dir_to_world([0.0, 0.0, 1.0]);
     let an_z: f64 = (0..3).map(|a| an.means[0][a] * zdir[a]).sum();
@@ -300,7 +300,7 @@ fn degenerate_inputs_cull_or_error_never_nan() {
     assert_eq!(cull(3), Some(Cull::Near));
     assert_eq!(cull(4), Some(Cull::OffImage));
     assert_eq!(cull(5), Some(Cull::Degenerate));
-    let gr = backward(&g, &cam, &st, &saved, &random_grads(6, 1));
+    let gr = backward(&g, &cam, &st, &s, &saved, &random_grads(6, 1));
     let all: Vec<f64> = flatten(&gr);
     assert!(all.iter().all(|x| x.is_finite()));
     for i in [0, 2, 3, 4, 5] {
@@ -383,8 +383,8 @@ fn f32_agrees_with_f64() {
             opacity: w.opacity.iter().map(|&x| x as f32).collect(),
             color: w.color.iter().map(|&x| x as f32).collect(),
         };
-        let a64 = flatten(&backward(&g, &cam, &st, &sv64, &w));
-        let a32 = flatten(&backward(&g32, &cam, &st, &sv32, &w32).cast::<f64>());
+        let a64 = flatten(&backward(&g, &cam, &st, &s64, &sv64, &w));
+        let a32 = flatten(&backward(&g32, &cam, &st, &s32, &sv32, &w32).cast::<f64>());
         let e = fd::rel_err_maxabs(&a32, &a64);
         assert!(e < 1e-4, "f32 gradient error {e:e}");
     }
@@ -408,7 +408,7 @@ fn output_is_bit_identical_for_any_thread_count() {
             .unwrap();
         runs.push(pool.install(|| {
             let (s, sv) = forward(&g, &cam, &st).unwrap();
-            let gr = backward(&g, &cam, &st, &sv, &w);
+            let gr = backward(&g, &cam, &st, &s, &sv, &w);
             let mut bits: Vec<u64> = flatten(&gr).iter().map(|x| x.to_bits()).collect();
             bits.extend(s.mean2d.iter().flatten().map(|x| x.to_bits()));
             bits.extend(s.conic.iter().flatten().map(|x| x.to_bits()));
@@ -436,7 +436,7 @@ fn projection_of_100k_gaussians_is_fast() {
         color: vec![1.0f32; g.len()],
     };
     let t0 = std::time::Instant::now();
-    let _ = backward(&g, &cam, &st, &sv, &w);
+    let _ = backward(&g, &cam, &st, &s, &sv, &w);
     let t_bwd = t0.elapsed();
     println!("100k Gaussians f32: forward {t_fwd:?}, backward {t_bwd:?}");
     assert!(s.radius.iter().filter(|&&r| r > 0).count() > 90_000);
@@ -564,13 +564,13 @@ fn every_simd_path_projects_alike_and_as_the_per_gaussian_code() {
             assert!(culled > n / 3 && culled < n * 2 / 3, "{culled} culled");
             for p in Simd::ALL {
                 let (s, sv) = forward_with(p, &g, &cam, &st).unwrap();
-                let gr = backward_with(p, &g, &cam, &st, &sv, &d);
+                let gr = backward_with(p, &g, &cam, &st, &s, &sv, &d);
                 assert!(
                     result_bits(&s, &gr) == want64,
                     "{p:?} {mode:?} {color:?} f64"
                 );
                 let (s, sv) = forward_with(p, &g32, &cam, &st).unwrap();
-                let gr = backward_with(p, &g32, &cam, &st, &sv, &d32);
+                let gr = backward_with(p, &g32, &cam, &st, &s, &sv, &d32);
                 assert!(
                     result_bits(&s, &gr) == want32,
                     "{p:?} {mode:?} {color:?} f32"
