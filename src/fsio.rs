@@ -119,7 +119,7 @@ pub fn check_not_output(field: &str, input: &Path, outputs: &[PathBuf]) -> Resul
 }
 
 /// The start of a framed binary file (the checkpoints): `magic`, a little-endian u64 header
-/// length, the header as JSON; the payload follows.
+/// length, the header as JSON; the payload follows, and [`seal`] ends the file with a checksum.
 pub fn frame_header<H: serde::Serialize>(magic: &[u8], header: &H) -> Vec<u8> {
     let hj = serde_json::to_vec(header).expect("header serialises");
     let mut b = Vec::with_capacity(magic.len() + 8 + hj.len());
@@ -127,6 +127,32 @@ pub fn frame_header<H: serde::Serialize>(magic: &[u8], header: &H) -> Vec<u8> {
     b.extend_from_slice(&(hj.len() as u64).to_le_bytes());
     b.extend_from_slice(&hj);
     b
+}
+
+/// End a framed file: append the [`crate::fingerprint::Words`] hash of every byte before it
+/// (8 bytes, little-endian), which [`read_frame`] checks.
+pub fn seal(buf: &mut Vec<u8>) {
+    let h = crate::fingerprint::Words::default().bytes(buf).finish();
+    buf.extend_from_slice(&h.to_le_bytes());
+}
+
+/// The bytes of a [`seal`]ed file without the checksum, after checking it.
+fn unseal<'a>(path: &Path, bytes: &'a [u8]) -> Result<&'a [u8]> {
+    let corrupt = || {
+        Error::format(
+            path,
+            "checksum",
+            "does not match the contents: the file is corrupt (a changed byte or a partial \
+             copy) or was written by an older unispine without a checksum",
+        )
+    };
+    let split = bytes.len().checked_sub(8).ok_or_else(corrupt)?;
+    let (body, sum) = bytes.split_at(split);
+    let h = crate::fingerprint::Words::default().bytes(body).finish();
+    if h.to_le_bytes() != sum {
+        return Err(corrupt());
+    }
+    Ok(body)
 }
 
 /// Split the bytes of the framed file `path` ([`frame_header`]) into its parsed header and
@@ -139,9 +165,11 @@ pub fn read_frame<'a, H: serde::de::DeserializeOwned>(
     what: &str,
 ) -> Result<(H, &'a [u8])> {
     let bad = |field: &str, msg: String| Error::format(path, field, msg);
-    let rest = bytes
-        .strip_prefix(magic)
-        .ok_or_else(|| bad("magic", format!("not {what}")))?;
+    if !bytes.starts_with(magic) {
+        return Err(bad("magic", format!("not {what}")));
+    }
+    let bytes = unseal(path, bytes)?;
+    let rest = &bytes[magic.len()..];
     if rest.len() < 8 {
         return Err(bad("header", "file ends inside the header length".into()));
     }
@@ -154,6 +182,128 @@ pub fn read_frame<'a, H: serde::de::DeserializeOwned>(
     let h = serde_json::from_slice(&rest[..hl])
         .map_err(|e| bad("header", format!("not valid JSON: {e}")))?;
     Ok((h, &rest[hl..]))
+}
+
+/// Largest plan or JSON record the harness reads (plans, `cell.json`, `metrics.json`,
+/// `config.json`, `data-args.json`): 16 MiB.
+pub const MAX_TEXT_BYTES: u64 = 16 << 20;
+
+/// Largest checkpoint read: 64 GiB (a device or FIFO is refused whatever the size).
+pub const MAX_CHECKPOINT_BYTES: u64 = 64 << 30;
+
+/// Largest `log.csv` read for charts: 256 MiB (a 20-million-iteration log).
+pub const MAX_LOG_BYTES: u64 = 256 << 20;
+
+/// Open `path` for reading only if it is a regular file (symlinks followed). The file is opened
+/// without blocking (a FIFO swapped in between the check and the open is refused, not waited
+/// on) and checked again on the open handle, so a device, FIFO or folder is refused before any
+/// byte is read.
+pub fn open_regular(path: &Path) -> Result<std::fs::File> {
+    let refuse = |what: &str| {
+        Error::format(
+            path,
+            "file",
+            format!("is {what}, not a regular file: refused"),
+        )
+    };
+    let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        return Err(refuse(file_kind(&meta)));
+    }
+    let mut opts = std::fs::OpenOptions::new();
+    opts.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        opts.custom_flags(libc::O_NONBLOCK);
+    }
+    let f = opts.open(path).map_err(|e| Error::io(path, e))?;
+    let meta = f.metadata().map_err(|e| Error::io(path, e))?;
+    if !meta.is_file() {
+        return Err(refuse(file_kind(&meta)));
+    }
+    Ok(f)
+}
+
+fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if meta.is_dir() {
+        "a folder"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// Read a regular file of at most `limit` bytes ([`open_regular`]); a larger file is an error
+/// naming the limit, found without reading more than `limit + 1` bytes.
+pub fn read_bounded(path: &Path, limit: u64) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let f = open_regular(path)?;
+    let mut buf = Vec::new();
+    f.take(limit + 1)
+        .read_to_end(&mut buf)
+        .map_err(|e| Error::io(path, e))?;
+    if buf.len() as u64 > limit {
+        return Err(Error::format(
+            path,
+            "file",
+            format!("is larger than the {limit} bytes allowed here"),
+        ));
+    }
+    Ok(buf)
+}
+
+/// [`read_bounded`] as UTF-8 text.
+pub fn read_text_bounded(path: &Path, limit: u64) -> Result<String> {
+    String::from_utf8(read_bounded(path, limit)?)
+        .map_err(|_| Error::format(path, "file", "is not UTF-8 text"))
+}
+
+/// `root.join(rel)` after checking that `rel` is relative, made of plain names only (no `..`,
+/// no root, no `.`), and that no part of it that already exists below `root` is a symbolic link,
+/// so that writing or removing the result can never reach outside `root`.
+pub fn path_under(root: &Path, rel: &Path) -> Result<PathBuf> {
+    use std::path::Component;
+    let mut p = root.to_path_buf();
+    for c in rel.components() {
+        let Component::Normal(name) = c else {
+            return Err(Error::invalid(
+                "path",
+                format!(
+                    "{} would leave the output folder {}",
+                    rel.display(),
+                    root.display()
+                ),
+            ));
+        };
+        p.push(name);
+        if let Ok(m) = std::fs::symlink_metadata(&p) {
+            if m.file_type().is_symlink() {
+                return Err(Error::invalid(
+                    "path",
+                    format!(
+                        "{} is a symbolic link inside the output folder: refused (nothing is \
+                         written or removed through a link)",
+                        p.display()
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(p)
 }
 
 #[cfg(test)]
@@ -190,5 +340,63 @@ mod tests {
         let e = check_not_output("--volume", &dotted, std::slice::from_ref(&v)).unwrap_err();
         assert!(e.to_string().contains("--volume"), "{e}");
         assert!(check_not_output("--volume", &v, &[d.path().join("train.npy")]).is_ok());
+    }
+
+    #[test]
+    fn bounded_reads_refuse_devices_fifos_folders_and_large_files() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("plan.toml");
+        std::fs::write(&p, b"0123456789").unwrap();
+        assert_eq!(read_bounded(&p, 10).unwrap(), b"0123456789");
+        let e = read_bounded(&p, 9).unwrap_err().to_string();
+        assert!(e.contains("larger than the 9 bytes"), "{e}");
+        for (dev, what) in [("/dev/zero", "a device"), ("/dev/urandom", "a device")] {
+            let e = read_bounded(Path::new(dev), 1 << 20)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(what) && e.contains(dev), "{e}");
+        }
+        let e = read_bounded(d.path(), 10).unwrap_err().to_string();
+        assert!(e.contains("a folder"), "{e}");
+        let fifo = d.path().join("fifo");
+        let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        // SAFETY: a valid NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        // Returns at once (no writer is ever attached): refused, not waited on.
+        let e = read_bounded(&fifo, 10).unwrap_err().to_string();
+        assert!(e.contains("a FIFO"), "{e}");
+        // A link to a device is followed and refused too.
+        let link = d.path().join("train.npy");
+        std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
+        assert!(read_bounded(&link, 10)
+            .unwrap_err()
+            .to_string()
+            .contains("a device"));
+    }
+
+    #[test]
+    fn paths_under_the_root_refuse_escapes_and_links() {
+        let d = tempfile::tempdir().unwrap();
+        let root = d.path().join("out");
+        std::fs::create_dir_all(root.join("runs")).unwrap();
+        assert_eq!(
+            path_under(&root, Path::new("runs/ct/m/seed0")).unwrap(),
+            root.join("runs/ct/m/seed0")
+        );
+        for bad in ["../x", "/etc", "runs/../../x", "./runs", ""] {
+            let r = path_under(&root, Path::new(bad));
+            if bad.is_empty() {
+                assert_eq!(r.unwrap(), root);
+            } else {
+                assert!(r.is_err(), "{bad}");
+            }
+        }
+        let outside = d.path().join("outside");
+        std::fs::create_dir(&outside).unwrap();
+        std::os::unix::fs::symlink(&outside, root.join("runs/ct")).unwrap();
+        let e = path_under(&root, Path::new("runs/ct/m"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("symbolic link"), "{e}");
     }
 }

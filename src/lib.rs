@@ -19,6 +19,8 @@
 
 // Foundations shared by every stage.
 pub mod error;
+/// Fingerprints (FNV-1a) of bytes, configs and datasets: identity checks, not security.
+pub mod fingerprint;
 /// Atomic file writes (temporary name + rename) and output-folder hygiene.
 pub mod fsio;
 pub mod image2d;

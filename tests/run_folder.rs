@@ -350,3 +350,58 @@ fn resumed_progress_counts_from_the_resumed_iteration() {
     assert!(err.contains("train: 24/24 "), "{err}");
     assert!(!err.contains("train: 15/24 "), "{err}");
 }
+
+#[test]
+fn resume_refuses_another_dataset_an_edited_config_and_a_corrupted_checkpoint() {
+    let ds = tiny::dataset();
+    let cfg = schedule();
+    let d = tempfile::tempdir().unwrap();
+    let never = AtomicBool::new(false);
+    let ctl = |stop_after| Control {
+        stop: &never,
+        stop_after,
+    };
+    let stopped = train::run_with(&cfg, &ds, Some(d.path()), ctl(Some(7)), &mut quiet).unwrap();
+    assert!(!stopped.completed);
+    let ckpt = d.path().join("checkpoint.bin");
+    let good = std::fs::read(&ckpt).unwrap();
+    let refused = |ds: &unispine::dataset::Dataset, words: &[&str]| {
+        let e = train::resume(d.path(), ds, ctl(None), &mut quiet)
+            .unwrap_err()
+            .to_string();
+        for w in words {
+            assert!(e.contains(w), "no `{w}` in: {e}");
+        }
+    };
+    // Another dataset: one projection value changed.
+    let mut other = tiny::dataset();
+    other.train.projections[0].data[5] += 0.25;
+    refused(&other, &["checkpoint.bin", "dataset"]);
+    // config.json edited: the intensity model reinterprets the features; then a setting that
+    // only the fingerprint sees.
+    let cfg_path = d.path().join("config.json");
+    let original = std::fs::read_to_string(&cfg_path).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&original).unwrap();
+    v["color"] = serde_json::json!("sh");
+    std::fs::write(&cfg_path, v.to_string()).unwrap();
+    refused(&ds, &["color", "sh"]);
+    let mut v: serde_json::Value = serde_json::from_str(&original).unwrap();
+    v["seed"] = serde_json::json!(cfg.seed + 1);
+    std::fs::write(&cfg_path, v.to_string()).unwrap();
+    refused(&ds, &["seed"]);
+    let mut v: serde_json::Value = serde_json::from_str(&original).unwrap();
+    v["background"] = serde_json::json!(0.5);
+    std::fs::write(&cfg_path, v.to_string()).unwrap();
+    refused(&ds, &["config.json changed"]);
+    std::fs::write(&cfg_path, &original).unwrap();
+    // A flipped bit in the middle of the parameters.
+    let mut bad = good.clone();
+    let mid = bad.len() / 2;
+    bad[mid] ^= 0x01;
+    std::fs::write(&ckpt, &bad).unwrap();
+    refused(&ds, &["checksum"]);
+    // Restored: it resumes and completes.
+    std::fs::write(&ckpt, &good).unwrap();
+    let m = train::resume(d.path(), &ds, ctl(None), &mut quiet).unwrap();
+    assert!(m.completed);
+}

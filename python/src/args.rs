@@ -12,6 +12,27 @@ use unispine::geometry::{Camera, ConeBeam, Mode};
 use unispine::render::{ColorMode, RenderSettings};
 use unispine::Real;
 
+/// The most memory one call may ask for, bytes: the binary's cap on a command's outputs
+/// (8 GiB). Inputs larger than this and calls whose outputs and working memory would be larger
+/// are refused with a `ValueError` naming the argument, instead of an allocation failure that
+/// would abort the interpreter.
+pub const MAX_BYTES: u128 = unispine::dataset::generate::MAX_PROJECTION_BYTES as u128;
+
+/// Bytes per pixel a rendering call may hold at once: the image and the saved transmittance in
+/// f64, the per-pixel contribution count, and the gradient image of a VJP.
+pub const BYTES_PER_PIXEL: u128 = 32;
+
+/// `ValueError` when `bytes` is above [`MAX_BYTES`]; `what` names the arguments responsible.
+pub fn check_budget(what: &str, bytes: u128) -> PyResult<()> {
+    if bytes > MAX_BYTES {
+        return Err(PyValueError::new_err(format!(
+            "{what}: this call would need {bytes} bytes, more than the {MAX_BYTES} (8 GiB) \
+             the module accepts; use fewer or smaller views"
+        )));
+    }
+    Ok(())
+}
+
 /// A float type the bindings compute in (f32 or f64), chosen by the dtype of the main input.
 pub trait Float: Real + Element {}
 impl Float for f32 {}
@@ -89,6 +110,12 @@ pub fn with_slice<R: Float, T>(
             got
         )));
     }
+    // Before anything is copied: a broadcast array can claim far more elements than it stores.
+    let elements = got.iter().fold(1u128, |n, &d| n.saturating_mul(d as u128));
+    check_budget(
+        &format!("`{name}` of shape {got:?}"),
+        elements.saturating_mul(std::mem::size_of::<R>() as u128),
+    )?;
     let arr = a.cast::<PyArrayDyn<R>>()?;
     let ro = arr
         .try_readonly()
@@ -232,6 +259,14 @@ pub fn angles(obj: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
     Ok(v)
 }
 
+/// Memory of `n` views of `pixels` pixels each: the cameras and [`BYTES_PER_PIXEL`] per pixel.
+fn views_bytes(n: usize, pixels: u128) -> u128 {
+    (n as u128).saturating_mul(
+        (std::mem::size_of::<Camera>() as u128)
+            .saturating_add(pixels.saturating_mul(BYTES_PER_PIXEL)),
+    )
+}
+
 /// The cameras of a call: either `geometry` + `angles` (TIGRE, exactly as the binary builds
 /// them) or `viewmats` [C, 4, 4] + `Ks` [C, 3, 3] + `width` + `height` (gsplat's convention).
 #[allow(clippy::too_many_arguments)]
@@ -252,7 +287,16 @@ pub fn cameras(
                 ));
             }
             let geo = geometry(g)?;
-            return Ok(angles(a)?.into_iter().map(|t| geo.camera(t)).collect());
+            let angles = angles(a)?;
+            let (w, h) = (geo.n_detector[0] as u128, geo.n_detector[1] as u128);
+            check_budget(
+                &format!(
+                    "`angles` ({} views) x the geometry's {w} x {h} detector",
+                    angles.len()
+                ),
+                views_bytes(angles.len(), w * h),
+            )?;
+            return Ok(angles.into_iter().map(|t| geo.camera(t)).collect());
         }
         (Some(_), None) | (None, Some(_)) => {
             return Err(PyValueError::new_err("`geometry` and `angles` go together"))
@@ -283,6 +327,10 @@ pub fn cameras(
     if c == 0 {
         return Err(PyValueError::new_err("`viewmats` holds no camera (C = 0)"));
     }
+    check_budget(
+        &format!("`viewmats` ({c} cameras) x `width` x `height` ({w} x {h})"),
+        views_bytes(c, w as u128 * h as u128),
+    )?;
     let (kd, _) = read_f64("Ks", k, &[Some(c), Some(3), Some(3)])?;
     let mut out = Vec::with_capacity(c);
     for ci in 0..c {

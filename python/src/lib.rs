@@ -493,6 +493,14 @@ fn drr<'py>(
 ) -> PyResult<Py<PyAny>> {
     let geo = args::geometry(geometry)?;
     let angles = args::angles(angles)?;
+    let (w, h) = geo.image_size();
+    args::check_budget(
+        &format!(
+            "`angles` ({} views) x the geometry's {w} x {h} detector",
+            angles.len()
+        ),
+        (angles.len() as u128).saturating_mul(w as u128 * h as u128 * 8),
+    )?;
     let method = match method {
         "siddon" => unispine::drr::Method::Siddon,
         "trilinear" => unispine::drr::Method::Trilinear,

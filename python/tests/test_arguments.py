@@ -149,3 +149,32 @@ def test_the_gil_is_released_during_a_render():
     # With the GIL held the ticker would not run at all during the call.
     assert single > 0.02, "the render is long enough to observe"
     assert len(during) >= 5, (len(during), t1 - t0)
+
+
+# Calls whose inputs or outputs exceed the module's 8 GiB cap raise ValueError naming the
+# argument, before anything large is allocated (the interpreter is not aborted).
+def test_huge_image_is_refused(ps):
+    with pytest.raises(ValueError, match="width.*height.*8 GiB"):
+        call(ps, width=32768, height=32768)
+
+
+def test_huge_broadcast_camera_count_is_refused(ps):
+    vms = np.broadcast_to(VM, (10**6, 4, 4))
+    ks = np.broadcast_to(K, (10**6, 3, 3))
+    with pytest.raises(ValueError, match="viewmats.*10+ cameras.*8 GiB"):
+        call(ps, viewmats=vms, Ks=ks)
+
+
+def test_huge_broadcast_angles_are_refused(ps):
+    angles = np.broadcast_to(np.float64(0.0), (10**8,))
+    with pytest.raises(ValueError, match="angles.*100000000 views.*8 GiB"):
+        unispine.rasterize(*ps, geometry=GEOMETRY, angles=angles)
+    vol = np.zeros((4, 4, 4))
+    with pytest.raises(ValueError, match="angles.*100000000 views.*8 GiB"):
+        unispine.drr(vol, GEOMETRY, angles)
+
+
+def test_huge_broadcast_ssim_inputs_are_refused():
+    img = np.broadcast_to(np.float64(0.5), (10**5, 10**5))
+    with pytest.raises(ValueError, match="img1.*8 GiB"):
+        unispine.ssim(img, img)

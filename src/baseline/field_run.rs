@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use super::{baseline_metrics, score_line_integrals, views_fps, write_run, Outcome};
 use crate::dataset::Dataset;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::field::checkpoint::FieldCheckpoint;
 use crate::field::train::FieldTrainer;
 use crate::field::{Field, FieldConfig};
@@ -32,8 +32,8 @@ pub fn resume(
     cfg.validate()?;
     let n_params = Field::<f32>::new(&cfg)?.params.len();
     let path = rd.path(CHECKPOINT);
-    let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
-    let c = FieldCheckpoint::from_bytes(&path, &bytes, &cfg, n_params)?;
+    let bytes = fsio::read_bounded(&path, fsio::MAX_CHECKPOINT_BYTES)?;
+    let c = FieldCheckpoint::from_bytes(&path, &bytes, &cfg, n_params, &ds.fingerprint())?;
     drop(bytes);
     let (o, field) = run_field(cfg, ds, (stop, stop_after), on_event, Some(&rd), Some(&c))?;
     crate::field::model::save(&rd.path("model.npz"), &field)?;
@@ -78,11 +78,12 @@ pub fn run_field(
             0.0,
         ),
     };
+    let fingerprint = store.map(|_| ds.fingerprint()).unwrap_or_default();
     let save = |tr: &FieldTrainer, t: f64, log: &str| -> Result<()> {
         match store {
             Some(rd) => fsio::write_atomic(
                 &rd.path(CHECKPOINT),
-                &tr.checkpoint(t, log).to_bytes(&tr.cfg),
+                &tr.checkpoint(t, log).to_bytes(&tr.cfg, &fingerprint),
             ),
             None => Ok(()),
         }

@@ -29,10 +29,13 @@ pub struct ReproduceArgs {
     /// List the cells of the plan with their index (for --task) and run folder.
     #[arg(long)]
     pub list: bool,
-    /// Run only cell I (0-based; what a Slurm array task runs). Without I: SLURM_ARRAY_TASK_ID.
-    #[arg(long, value_name = "I", num_args = 0..=1, default_missing_value = "-1",
-          allow_negative_numbers = true)]
-    pub task: Option<i64>,
+    /// Run only cell I, 0 <= I < the plan's cell count (what a Slurm array task runs).
+    /// `--task` alone reads I from SLURM_ARRAY_TASK_ID.
+    #[arg(long, value_name = "I", num_args = 0..=1, allow_negative_numbers = true)]
+    pub task: Option<Option<String>>,
+    /// Refuse plans with more cells than this (a guard against a mistyped plan).
+    #[arg(long, value_name = "N", default_value_t = crate::reproduce::plan::DEFAULT_MAX_CELLS)]
+    pub max_cells: usize,
     /// Only build the tables from the cells that finished.
     #[arg(long)]
     pub collect: bool,
@@ -72,6 +75,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
     crate::par::check_workers("--jobs", args.jobs)?;
     let schema = TrainSchema::of_train();
     let plan = Plan::load(plan_arg, &schema)?;
+    plan.check_cells(args.max_cells)?;
     let out = args
         .out
         .clone()
@@ -96,19 +100,26 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
     } else {
         base_dir
     };
-    let task = match args.task {
+    let task = match &args.task {
         None => None,
-        Some(-1) => {
-            let v = std::env::var("SLURM_ARRAY_TASK_ID")
-                .context("--task without I needs SLURM_ARRAY_TASK_ID")?;
-            Some(
-                v.trim()
-                    .parse::<usize>()
-                    .with_context(|| format!("SLURM_ARRAY_TASK_ID `{v}` is not a cell index"))?,
-            )
+        Some(given) => {
+            let (what, v) = match given {
+                Some(v) => ("--task", v.clone()),
+                None => (
+                    "SLURM_ARRAY_TASK_ID",
+                    std::env::var("SLURM_ARRAY_TASK_ID")
+                        .context("--task without I needs SLURM_ARRAY_TASK_ID")?,
+                ),
+            };
+            match v.trim().parse::<usize>() {
+                Ok(i) if i < cells.len() => Some(i),
+                _ => anyhow::bail!(
+                    "invalid {what} `{v}`: a cell index in 0..={} (the plan has {} cells)",
+                    cells.len().saturating_sub(1),
+                    cells.len()
+                ),
+            }
         }
-        Some(i) if i < 0 => anyhow::bail!("invalid `--task`: {i} is negative"),
-        Some(i) => Some(i as usize),
     };
     let cores = std::env::var("SLURM_CPUS_PER_TASK")
         .ok()
@@ -133,6 +144,9 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
         } else {
             abs(std::path::Path::new(plan_arg)).display().to_string()
         };
+        // Paths that cannot be written into a script are refused before anything is built.
+        crate::reproduce::slurm::sh_path("--out", &abs(&out))?;
+        crate::reproduce::slurm::sh_path("PLAN", &abs(std::path::Path::new(plan_arg)))?;
         std::fs::create_dir_all(&out).with_context(|| out.display().to_string())?;
         let mut on_event = |e: &RunEvent| {
             if let RunEvent::DatasetBuilding { name } = e {
@@ -161,6 +175,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     let mut extra = String::new();
+    let mut failed_now = 0;
     if !args.collect {
         eprintln!(
             "plan `{}`: {} cells ({} datasets x {} methods{} x {} seeds), {} iterations each, \
@@ -214,6 +229,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
             }
         };
         let sum = run::run_plan(&plan, &opts, &mut on_event)?;
+        failed_now = sum.failed;
         if task.is_some() {
             if sum.failed > 0 {
                 anyhow::bail!("the cell failed (see its cell.json and train.log)");
@@ -280,10 +296,11 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
             .collect::<Vec<_>>()
             .join(", ")
     );
-    if !args.collect && rows.iter().any(|r| r.status == "failed") {
+    let failed_rows = rows.iter().filter(|r| r.status == "failed").count();
+    if !args.collect && (failed_now > 0 || failed_rows > 0) {
         anyhow::bail!(
-            "{} cell(s) failed (their errors are in tables.md)",
-            rows.iter().filter(|r| r.status == "failed").count()
+            "{} cell(s) failed (their errors are above and in tables.md)",
+            failed_now.max(failed_rows)
         );
     }
     Ok(())

@@ -63,4 +63,24 @@ impl Dataset {
     pub fn test_camera(&self, k: usize) -> Camera {
         self.geometry.camera(self.test.angles[k])
     }
+    /// Fingerprint of what training and evaluation read: the geometry, each split's angles
+    /// and projections (sizes and values), as 16 hex digits
+    /// ([`crate::fingerprint::Words`]). Where the dataset is stored does not enter it.
+    pub fn fingerprint(&self) -> String {
+        let mut h = crate::fingerprint::Words::default();
+        h.bytes(
+            serde_json::to_string(&self.geometry)
+                .expect("the geometry serialises")
+                .as_bytes(),
+        );
+        for split in [&self.train, &self.test] {
+            h.f64s(&split.angles);
+            for p in &split.projections {
+                h.bytes(&(p.width as u64).to_le_bytes())
+                    .bytes(&(p.height as u64).to_le_bytes())
+                    .f32s(&p.data);
+            }
+        }
+        h.hex()
+    }
 }

@@ -5,8 +5,10 @@
 //! [`super::train::FieldTrainer::batch`]).
 //!
 //! Layout: the magic line `unispine-field-checkpoint`, a little-endian u64 header length, the
-//! header as JSON (`Header`), the log (UTF-8), then the parameters, `m` and `v` as
-//! little-endian f32 arrays of `n_params` values each.
+//! header as JSON (`Header`: the run it belongs to, with the dataset's and the config's
+//! fingerprints, and the sizes), the log (UTF-8), then the parameters, `m` and `v` as
+//! little-endian f32 arrays of `n_params` values each, and the checksum of everything before
+//! it ([`crate::fsio::seal`]).
 
 use std::path::Path;
 
@@ -17,7 +19,7 @@ use crate::error::{Error, Result};
 use crate::fsio;
 
 const MAGIC: &[u8] = b"unispine-field-checkpoint\n";
-const VERSION: u32 = 1;
+const VERSION: u32 = 2;
 
 /// Everything a resumed field run needs.
 #[derive(Clone, Debug, PartialEq)]
@@ -40,6 +42,10 @@ struct Header {
     format_version: u32,
     preset: String,
     seed: u64,
+    /// [`crate::dataset::Dataset::fingerprint`] of the training data.
+    dataset: String,
+    /// [`crate::fingerprint::config`] of the run's config.
+    config: String,
     iterations_total: usize,
     iteration: usize,
     n_params: usize,
@@ -64,12 +70,15 @@ pub fn file_is_field_checkpoint(path: &Path) -> bool {
 }
 
 impl FieldCheckpoint {
-    /// The file's bytes for the run configured by `cfg`.
-    pub fn to_bytes(&self, cfg: &FieldConfig) -> Vec<u8> {
+    /// The file's bytes for the run configured by `cfg` on the dataset of fingerprint
+    /// `dataset`.
+    pub fn to_bytes(&self, cfg: &FieldConfig, dataset: &str) -> Vec<u8> {
         let h = Header {
             format_version: VERSION,
             preset: cfg.preset.clone(),
             seed: cfg.seed,
+            dataset: dataset.to_string(),
+            config: crate::fingerprint::config(cfg),
             iterations_total: cfg.iterations,
             iteration: self.iteration,
             n_params: self.params.len(),
@@ -85,16 +94,20 @@ impl FieldCheckpoint {
                 b.extend_from_slice(&v.to_le_bytes());
             }
         }
+        fsio::seal(&mut b);
         b
     }
 
     /// Parse the file `path` (its bytes `bytes`) as a checkpoint of the run configured by
-    /// `cfg` with `n_params` parameters; every mismatch is an error naming the file and field.
+    /// `cfg` with `n_params` parameters on the dataset of fingerprint `dataset`; every mismatch
+    /// (another run's checkpoint, an edited config, another dataset, a changed byte) is an
+    /// error naming the file and field.
     pub fn from_bytes(
         path: &Path,
         bytes: &[u8],
         cfg: &FieldConfig,
         n_params: usize,
+        dataset: &str,
     ) -> Result<Self> {
         let bad = |field: &str, msg: String| Error::format(path, field, msg);
         let (h, rest): (Header, _) =
@@ -125,6 +138,26 @@ impl FieldCheckpoint {
             cfg.iterations.to_string(),
         )?;
         want("n_params", h.n_params.to_string(), n_params.to_string())?;
+        if h.dataset != dataset {
+            return Err(bad(
+                "dataset",
+                format!(
+                    "fingerprint {}, but the dataset given has {dataset} (not this run's data)",
+                    h.dataset
+                ),
+            ));
+        }
+        let now = crate::fingerprint::config(cfg);
+        if h.config != now {
+            return Err(bad(
+                "config",
+                format!(
+                    "config.json changed since the checkpoint was written (fingerprint {} then, \
+                     {now} now): refused",
+                    h.config
+                ),
+            ));
+        }
         if h.iteration > cfg.iterations {
             return Err(bad(
                 "iteration",
@@ -210,16 +243,19 @@ mod tests {
     #[test]
     fn round_trips_and_names_what_is_wrong() {
         let (c, p) = (ckpt(10), Path::new("run/checkpoint.bin"));
-        let b = c.to_bytes(&cfg());
+        let b = c.to_bytes(&cfg(), DS);
         assert!(is_field_checkpoint(&b));
-        assert_eq!(FieldCheckpoint::from_bytes(p, &b, &cfg(), 10).unwrap(), c);
+        assert_eq!(
+            FieldCheckpoint::from_bytes(p, &b, &cfg(), 10, DS).unwrap(),
+            c
+        );
         let err = |bytes: &[u8], cfg: &FieldConfig, n: usize| {
-            FieldCheckpoint::from_bytes(p, bytes, cfg, n)
+            FieldCheckpoint::from_bytes(p, bytes, cfg, n, DS)
                 .unwrap_err()
                 .to_string()
         };
         // Truncated, another run's parameter count, seed or preset, a Gaussian checkpoint.
-        assert!(err(&b[..b.len() - 3], &cfg(), 10).contains("n_params"));
+        assert!(err(&b[..b.len() - 3], &cfg(), 10).contains("checksum"));
         assert!(err(&b, &cfg(), 11).contains("n_params"));
         let mut other = cfg();
         other.seed = 3;
@@ -229,7 +265,28 @@ mod tests {
         assert!(err(b"unispine-checkpoint\n....", &cfg(), 10).contains("magic"));
         let mut nan = ckpt(10);
         nan.adam_v[4] = f32::NAN;
-        assert!(err(&nan.to_bytes(&cfg()), &cfg(), 10).contains("adam_v"));
+        assert!(err(&nan.to_bytes(&cfg(), DS), &cfg(), 10).contains("adam_v"));
         assert!(err(&b, &cfg(), 11).contains("run/checkpoint.bin"));
+    }
+
+    const DS: &str = "00112233aabbccdd";
+
+    #[test]
+    fn a_flipped_bit_another_dataset_or_an_edited_config_is_refused() {
+        let (c, p) = (ckpt(10), Path::new("run/checkpoint.bin"));
+        let b = c.to_bytes(&cfg(), DS);
+        // Every bit of the payload and of the header's values.
+        for i in MAGIC.len()..b.len() {
+            let mut f = b.clone();
+            f[i] ^= 0x10;
+            let e = FieldCheckpoint::from_bytes(p, &f, &cfg(), 10, DS).unwrap_err();
+            assert!(e.to_string().contains("checksum"), "byte {i}: {e}");
+        }
+        let e = FieldCheckpoint::from_bytes(p, &b, &cfg(), 10, "ffffffffffffffff").unwrap_err();
+        assert!(e.to_string().contains("dataset"), "{e}");
+        let mut edited = cfg();
+        edited.lr *= 2.0;
+        let e = FieldCheckpoint::from_bytes(p, &b, &edited, 10, DS).unwrap_err();
+        assert!(e.to_string().contains("config.json changed"), "{e}");
     }
 }

@@ -124,7 +124,7 @@ pub fn tradeoff_chart(runs: &[PathBuf]) -> Result<String> {
 /// One run's `log.csv` as (iteration, training PSNR, Gaussian count) rows.
 pub fn read_log(run: &Path) -> Result<Vec<(f64, f64, f64)>> {
     let p = run.join("log.csv");
-    let s = std::fs::read_to_string(&p).map_err(|e| Error::io(&p, e))?;
+    let s = crate::fsio::read_text_bounded(&p, crate::fsio::MAX_LOG_BYTES)?;
     let mut lines = s.lines();
     let header: Vec<&str> = lines.next().unwrap_or("").split(',').collect();
     let col = |name: &str| {

@@ -329,9 +329,11 @@ pub fn stability_map(rows: &[Row], floor_db: Option<f64>) -> String {
                 let dark = !ok.is_empty() && (mean_sd(&ok).0 - lo) > 0.6 * (hi - lo);
                 let _ = writeln!(
                     s,
-                    r##"<rect class="cell" x="{x:.1}" y="{y:.1}" width="{cw:.1}" height="{ch:.1}" fill="{fill}" stroke="{}" stroke-width="{}"><title>{d} / {m} / {}: {} of {} seeds finished, {failed} failed, {below} below the floor</title></rect>"##,
+                    r##"<rect class="cell" x="{x:.1}" y="{y:.1}" width="{cw:.1}" height="{ch:.1}" fill="{fill}" stroke="{}" stroke-width="{}"><title>{} / {} / {}: {} of {} seeds finished, {failed} failed, {below} below the floor</title></rect>"##,
                     if below > 0 { "#d00000" } else { "#ffffff" },
                     if below > 0 { 3 } else { 1 },
+                    svg::escape(d),
+                    svg::escape(m),
                     svg::escape(c.as_deref().unwrap_or("-")),
                     ok.len(),
                     rs.len()
@@ -557,5 +559,97 @@ mod tests {
     fn heat_runs_from_light_to_dark() {
         assert_eq!(heat(0.0, 0.0, 1.0), "#fff7bc");
         assert_eq!(heat(1.0, 0.0, 1.0), "#084081");
+    }
+
+    /// Check that `doc` is well-formed markup: tags nest, every `&` starts an entity, no `<`
+    /// inside text or an attribute value; and that no element is named `script`.
+    fn assert_well_formed(doc: &str) {
+        let mut stack: Vec<String> = Vec::new();
+        let b = doc.as_bytes();
+        let mut i = 0;
+        while i < b.len() {
+            match b[i] {
+                b'<' => {
+                    let end = i + doc[i..].find('>').expect("unclosed tag");
+                    let tag = &doc[i + 1..end];
+                    assert!(!tag.contains('<'), "`<` inside a tag: {tag}");
+                    let quotes = tag.matches('"').count();
+                    assert!(quotes % 2 == 0, "unbalanced quotes in {tag}");
+                    if !(tag.starts_with('!') || tag.starts_with('?')) {
+                        let name: String = tag
+                            .trim_start_matches('/')
+                            .chars()
+                            .take_while(|c| c.is_ascii_alphanumeric())
+                            .collect();
+                        assert!(!name.eq_ignore_ascii_case("script"), "a script element");
+                        let void = ["meta", "br", "hr", "img", "link", "input"];
+                        if tag.starts_with('/') {
+                            assert_eq!(stack.pop().as_deref(), Some(name.as_str()), "at {tag}");
+                        } else if !tag.ends_with('/') && !void.contains(&name.as_str()) {
+                            stack.push(name);
+                        }
+                    }
+                    i = end + 1;
+                }
+                b'&' => {
+                    let rest = &doc[i + 1..];
+                    let ok = ["amp;", "lt;", "gt;", "quot;", "#39;", "#160;"]
+                        .iter()
+                        .any(|e| rest.starts_with(e));
+                    assert!(ok, "a bare `&` at {}", &doc[i..(i + 12).min(doc.len())]);
+                    i += 1;
+                }
+                _ => i += 1,
+            }
+        }
+        assert!(stack.is_empty(), "unclosed elements {stack:?}");
+    }
+
+    #[test]
+    fn names_with_markup_are_escaped_in_every_chart_and_the_report() {
+        let evil = |k: &str| format!("<script>alert('{k}')</script>\"&x");
+        let mut rows = Vec::new();
+        for (i, seed) in [0u64, 1].iter().enumerate() {
+            rows.push(Row {
+                index: i,
+                dataset: evil("d"),
+                paper_dataset: Some(evil("p")),
+                method: evil("m"),
+                base: "unispine".into(),
+                sweep_flag: Some(evil("f")),
+                sweep_value: Some(evil("v")),
+                seed: *seed,
+                iters: 10,
+                status: "done".into(),
+                completed: true,
+                psnr: Some(30.0 + i as f64),
+                ssim: Some(0.9),
+                train_time_s: Some(1.0),
+                fps: Some(100.0),
+                n_gaussians: Some(1000),
+                curve: vec![(5, 20.0), (10, 30.0)],
+                run_dir: evil("r"),
+                error: Some(evil("e")),
+                ..Default::default()
+            });
+        }
+        let d = tempfile::tempdir().unwrap();
+        let cs = charts(&rows, d.path(), Some(31.0));
+        assert!(cs.iter().any(|c| c.0 == "stability.svg"));
+        for (name, title, svg) in &cs {
+            assert_well_formed(svg);
+            assert!(!svg.contains("<script"), "{name}");
+            assert!(!title.is_empty());
+        }
+        let md = format!(
+            "# {}\n\n| a | b |\n|---|---|\n| {} | {} |\n\n- {}\n",
+            evil("h"),
+            evil("c1"),
+            evil("c2"),
+            evil("l")
+        );
+        let html = markdown_to_html(&md);
+        assert_well_formed(&html);
+        assert!(html.contains("&lt;script&gt;alert(&#39;c1&#39;)&lt;/script&gt;&quot;&amp;x"));
     }
 }

@@ -15,7 +15,7 @@ use super::verdict::{self, Obs, Verdict};
 use crate::error::{Error, Result};
 
 /// One cell's result.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct Row {
     pub index: usize,
     pub dataset: String,
@@ -71,9 +71,10 @@ fn read_row(plan: &Plan, out: &Path, c: &Cell) -> Row {
     let rel = c.rel_dir(plan);
     let dir = out.join(&rel);
     let rec = read_record(&dir);
-    let metrics: Option<serde_json::Value> = std::fs::read_to_string(dir.join("metrics.json"))
-        .ok()
-        .and_then(|s| serde_json::from_str(&s).ok());
+    let metrics: Option<serde_json::Value> =
+        crate::fsio::read_text_bounded(&dir.join("metrics.json"), crate::fsio::MAX_TEXT_BYTES)
+            .ok()
+            .and_then(|s| serde_json::from_str(&s).ok());
     let m = metrics.as_ref();
     let completed = m
         .and_then(|m| m.get("completed"))

@@ -4,6 +4,7 @@
 //!
 //! Checksums are FNV-1a 64 (an identity check between runs, not a security measure).
 
+use std::io::Read;
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
@@ -18,27 +19,26 @@ pub fn git_commit() -> &'static str {
     option_env!("UNISPINE_GIT_COMMIT").unwrap_or("unknown")
 }
 
-/// FNV-1a, 64 bit.
-pub fn fnv1a(bytes: &[u8]) -> u64 {
-    fnv1a_continue(0xcbf2_9ce4_8422_2325, bytes)
-}
-
-fn fnv1a_continue(mut h: u64, bytes: &[u8]) -> u64 {
-    for &b in bytes {
-        h ^= b as u64;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    h
-}
+pub use crate::fingerprint::fnv1a;
+use crate::fingerprint::{fnv1a_continue, FNV_OFFSET};
 
 /// Checksum of a dataset folder: FNV-1a 64 over `dataset.json`, `train.npy` and `test.npy`
 /// (in that order), hex.
 pub fn dataset_checksum(dir: &Path) -> Result<String> {
-    let mut h = 0xcbf2_9ce4_8422_2325;
+    let mut h = FNV_OFFSET;
     for f in ["dataset.json", "train.npy", "test.npy"] {
         let p = dir.join(f);
-        let b = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
-        h = fnv1a_continue(h, &b);
+        // A regular file only (a link to a device or a FIFO is refused before reading), read in
+        // blocks so that memory stays bounded whatever its size.
+        let mut file = crate::fsio::open_regular(&p)?;
+        let mut buf = vec![0u8; 1 << 20];
+        loop {
+            let n = file.read(&mut buf).map_err(|e| Error::io(&p, e))?;
+            if n == 0 {
+                break;
+            }
+            h = fnv1a_continue(h, &buf[..n]);
+        }
     }
     Ok(format!("{h:016x}"))
 }
@@ -46,7 +46,8 @@ pub fn dataset_checksum(dir: &Path) -> Result<String> {
 /// Hash of a run's `config.json` without its `data` field (the dataset's location is not part
 /// of the config's meaning; its checksum is recorded separately), hex.
 pub fn config_hash(run: &Path) -> Option<String> {
-    let s = std::fs::read_to_string(run.join("config.json")).ok()?;
+    let s = crate::fsio::read_text_bounded(&run.join("config.json"), crate::fsio::MAX_TEXT_BYTES)
+        .ok()?;
     let mut v: serde_json::Value = serde_json::from_str(&s).ok()?;
     if let Some(o) = v.as_object_mut() {
         o.remove("data");
@@ -59,7 +60,8 @@ pub fn config_hash(run: &Path) -> Option<String> {
 pub struct Machine {
     pub cpu_model: String,
     pub cores: usize,
-    /// The rasterizer's SIMD path on this CPU (`avx2` or `scalar`).
+    /// The SIMD path the kernels ran on ([`crate::simd::Simd::active`]: `avx512`, `avx2` or
+    /// `scalar`).
     pub simd: String,
     pub version: String,
     pub git_commit: String,
@@ -82,33 +84,9 @@ impl Machine {
             cores: std::thread::available_parallelism()
                 .map(|n| n.get())
                 .unwrap_or(1),
-            simd: simd_path().to_string(),
+            simd: crate::simd::Simd::active().name().to_string(),
             version: VERSION.to_string(),
             git_commit: git_commit().to_string(),
         }
-    }
-}
-
-/// The SIMD path the compositing kernels take on this CPU (see `render::composite`).
-pub fn simd_path() -> &'static str {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::is_x86_feature_detected!("avx2") {
-            return "avx2";
-        }
-    }
-    "scalar"
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn fnv1a_matches_the_reference_vectors() {
-        // Published FNV-1a 64 test vectors.
-        assert_eq!(fnv1a(b""), 0xcbf29ce484222325);
-        assert_eq!(fnv1a(b"a"), 0xaf63dc4c8601ec8c);
-        assert_eq!(fnv1a(b"foobar"), 0x85944171f73967e8);
     }
 }

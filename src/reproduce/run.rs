@@ -12,7 +12,7 @@
 //!   others go on.
 //! - The library never prints: progress leaves as [`RunEvent`]s.
 
-use std::io::{Read, Write};
+use std::io::{Read, Seek, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::mpsc;
@@ -124,13 +124,13 @@ pub fn write_json<T: Serialize>(path: &Path, v: &T) -> Result<()> {
 
 /// Read a cell's `cell.json`, if any.
 pub fn read_record(dir: &Path) -> Option<CellRecord> {
-    let s = std::fs::read_to_string(dir.join("cell.json")).ok()?;
-    serde_json::from_str(&s).ok()
+    let s = crate::fsio::read_text_bounded(&dir.join("cell.json"), crate::fsio::MAX_TEXT_BYTES);
+    serde_json::from_str(&s.ok()?).ok()
 }
 
 /// Whether a run folder's `metrics.json` says it completed.
 pub fn metrics_completed(dir: &Path) -> bool {
-    std::fs::read_to_string(dir.join("metrics.json"))
+    crate::fsio::read_text_bounded(&dir.join("metrics.json"), crate::fsio::MAX_TEXT_BYTES)
         .ok()
         .and_then(|s| serde_json::from_str::<serde_json::Value>(&s).ok())
         .and_then(|v| v.get("completed").and_then(|c| c.as_bool()))
@@ -140,16 +140,23 @@ pub fn metrics_completed(dir: &Path) -> bool {
 /// The last `n` lines of a file (for error messages).
 fn tail(path: &Path, n: usize) -> String {
     let mut s = String::new();
-    if let Ok(mut f) = std::fs::File::open(path) {
-        let _ = f.read_to_string(&mut s);
+    if let Ok(f) = crate::fsio::open_regular(path) {
+        // The end of a log is what says why a run failed: read at most its last 64 KiB.
+        let mut f = f;
+        let len = f.metadata().map(|m| m.len()).unwrap_or(0);
+        let _ = f.seek(std::io::SeekFrom::Start(len.saturating_sub(64 << 10)));
+        let mut b = Vec::new();
+        let _ = f.take(64 << 10).read_to_end(&mut b);
+        s = String::from_utf8_lossy(&b).into_owned();
     }
     let lines: Vec<&str> = s.lines().filter(|l| !l.trim().is_empty()).collect();
     lines[lines.len().saturating_sub(n)..].join(" | ")
 }
 
-/// Folder of a dataset built from `data` arguments.
-pub fn built_dataset_dir(out: &Path, name: &str) -> PathBuf {
-    out.join("datasets").join(name)
+/// Folder of a dataset built from `data` arguments (`name` is a checked plan name; the folder
+/// is refused when a part of it inside `out` is a symbolic link).
+pub fn built_dataset_dir(out: &Path, name: &str) -> Result<PathBuf> {
+    crate::fsio::path_under(out, &Path::new("datasets").join(name))
 }
 
 /// Find or build one dataset. `Ok(None)`: optional and unavailable (reason in the event).
@@ -174,9 +181,9 @@ pub fn prepare_dataset(
             p.clone()
         }
         Source::Data(args) => {
-            let dir = built_dataset_dir(&opts.out, &d.name);
+            let dir = built_dataset_dir(&opts.out, &d.name)?;
             let stamp = dir.join("data-args.json");
-            let same = std::fs::read_to_string(&stamp)
+            let same = crate::fsio::read_text_bounded(&stamp, crate::fsio::MAX_TEXT_BYTES)
                 .ok()
                 .and_then(|s| serde_json::from_str::<Vec<String>>(&s).ok())
                 .is_some_and(|a| a == *args)
@@ -249,9 +256,12 @@ fn run_cell(
     threads: usize,
     machine: &Machine,
 ) -> Outcome {
-    let dir = opts.out.join(cell.rel_dir(plan));
     let args = cell.train_args(plan);
     let fail = |error: String| Outcome::Failed { error };
+    let dir = match crate::fsio::path_under(&opts.out, &cell.rel_dir(plan)) {
+        Ok(d) => d,
+        Err(e) => return fail(e.to_string()),
+    };
     let ds = match ds {
         Ok(d) => d,
         Err(e) => {

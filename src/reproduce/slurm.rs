@@ -29,63 +29,92 @@ pub fn sh_quote(s: &str) -> String {
     }
 }
 
+/// A path as a quoted shell word; a path with a line break or a NUL is refused (`what` names it
+/// in the error), since no quoting keeps a line break out of a `#SBATCH` line or a log.
+pub fn sh_path(what: &str, p: &Path) -> Result<String> {
+    let s = p
+        .to_str()
+        .ok_or_else(|| Error::invalid(what, format!("{} is not valid UTF-8", p.display())))?;
+    if s.contains(['\n', '\r', '\0']) {
+        return Err(Error::invalid(
+            what,
+            format!("{s:?} contains a line break or NUL: refused in a generated script"),
+        ));
+    }
+    Ok(sh_quote(s))
+}
+
 /// The three files (name, text) for a plan. `bin`, `plan_arg` (a built-in name or an absolute
 /// plan path), `out` and `workdir` (where relative paths of the plan resolve) are written as
 /// given: pass absolute paths.
+///
+/// No text of the plan reaches a `#SBATCH` line or a command except the plan's name (checked
+/// by [`super::plan::names`]) and the `[slurm]` values (checked against their grammars by
+/// [`super::plan::SlurmSpec`]); paths are quoted and appear only in commands, never in a
+/// `#SBATCH` line: the jobs start in `OUT/slurm/` (where `submit.sh` submits them, so their
+/// logs land there) and change to `workdir` in the script.
 pub fn scripts(
     plan: &Plan,
     bin: &Path,
     plan_arg: &str,
     out: &Path,
     workdir: &Path,
-) -> Vec<(String, String)> {
+) -> Result<Vec<(String, String)>> {
     let n = cells(plan).len();
-    let q = |p: &Path| sh_quote(&p.display().to_string());
+    if plan_arg.contains(['\n', '\r', '\0']) {
+        return Err(Error::invalid(
+            "PLAN",
+            format!("{plan_arg:?} contains a line break or NUL: refused in a generated script"),
+        ));
+    }
     let slurm_dir = out.join("slurm");
-    let common = format!(
-        "#SBATCH --job-name=unispine-{name}\n#SBATCH --chdir={wd}\n",
-        name = plan.name,
-        wd = q(workdir)
+    let (bin, out_q, wd, sd) = (
+        sh_path("unispine binary", bin)?,
+        sh_path("--out", out)?,
+        sh_path("plan folder", workdir)?,
+        sh_path("--out", &slurm_dir)?,
     );
+    let plan_q = sh_quote(plan_arg);
+    let mut common = format!("#SBATCH --job-name=unispine-{}\n", plan.name);
+    if let Some(p) = &plan.slurm.partition {
+        common.push_str(&format!("#SBATCH --partition={p}\n"));
+    }
+    if let Some(a) = &plan.slurm.account {
+        common.push_str(&format!("#SBATCH --account={a}\n"));
+    }
     let array = format!(
         "#!/bin/bash\n\
-         # One task per cell of plan `{name}` ({n} cells); written by unispine reproduce --emit-slurm.\n\
+         # One task per cell of the plan ({n} cells); written by unispine reproduce --emit-slurm.\n\
          {common}\
          #SBATCH --array=0-{last}\n\
          #SBATCH --cpus-per-task={cpus}\n\
          #SBATCH --mem={mem}\n\
          #SBATCH --time={time}\n\
          #SBATCH --requeue\n\
-         #SBATCH --output={sd}/task_%A_%a.txt\n\
-         exec {bin} reproduce {plan_arg} --out {out} --task \"$SLURM_ARRAY_TASK_ID\"\n",
-        name = plan.name,
+         #SBATCH --output=task_%A_%a.txt\n\
+         cd {wd} || exit 1\n\
+         exec {bin} reproduce {plan_q} --out {out_q} --task \"$SLURM_ARRAY_TASK_ID\"\n",
         last = n.saturating_sub(1),
         cpus = plan.slurm.cpus_per_task,
         mem = plan.slurm.mem,
         time = plan.slurm.time,
-        sd = q(&slurm_dir),
-        bin = q(bin),
-        plan_arg = sh_quote(plan_arg),
-        out = q(out),
     );
     let collect = format!(
         "#!/bin/bash\n\
-         # Tables, verdicts and charts of plan `{name}` from the cells that finished.\n\
+         # Tables, verdicts and charts of the plan from the cells that finished.\n\
          {common}\
          #SBATCH --cpus-per-task=1\n\
          #SBATCH --mem=2G\n\
          #SBATCH --time=01:00:00\n\
-         #SBATCH --output={sd}/collect_%j.txt\n\
-         exec {bin} reproduce {plan_arg} --out {out} --collect\n",
-        name = plan.name,
-        sd = q(&slurm_dir),
-        bin = q(bin),
-        plan_arg = sh_quote(plan_arg),
-        out = q(out),
+         #SBATCH --output=collect_%j.txt\n\
+         cd {wd} || exit 1\n\
+         exec {bin} reproduce {plan_q} --out {out_q} --collect\n",
     );
+    let results = sh_path("--out", &out.join("tables.md"))?;
+    let report = sh_path("--out", &out.join("report.html"))?;
     let submit = format!(
         "#!/bin/sh\n\
-         # Submit plan `{name}`: the job array, then the collect job once every task succeeded.\n\
+         # Submit the plan: the job array, then the collect job once every task succeeded.\n\
          set -eu\n\
          cd {sd}\n\
          array=$(sbatch --parsable array.sbatch)\n\
@@ -93,16 +122,13 @@ pub fn scripts(
          collect=$(sbatch --parsable --dependency=afterok:\"$array\" --kill-on-invalid-dep=yes collect.sbatch)\n\
          collect=${{collect%%;*}}\n\
          echo \"array job $array ({n} tasks), collect job $collect\"\n\
-         echo \"results: {out}/tables.md, {out}/report.html\"\n",
-        name = plan.name,
-        sd = q(&slurm_dir),
-        out = out.display(),
+         printf 'results: %s, %s\\n' {results} {report}\n",
     );
-    vec![
+    Ok(vec![
         ("array.sbatch".into(), array),
         ("collect.sbatch".into(), collect),
         ("submit.sh".into(), submit),
-    ]
+    ])
 }
 
 /// Write the scripts into `out/slurm/` (executable); returns the path of `submit.sh`.
@@ -113,12 +139,13 @@ pub fn write_scripts(
     out: &Path,
     workdir: &Path,
 ) -> Result<std::path::PathBuf> {
-    let dir = out.join("slurm");
+    let texts = scripts(plan, bin, plan_arg, out, workdir)?;
+    let dir = crate::fsio::path_under(out, Path::new("slurm"))?;
     std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
     let mut submit = dir.join("submit.sh");
-    for (name, text) in scripts(plan, bin, plan_arg, out, workdir) {
+    for (name, text) in texts {
         let p = dir.join(&name);
-        std::fs::write(&p, text).map_err(|e| Error::io(&p, e))?;
+        crate::fsio::write_atomic(&p, text.as_bytes())?;
         #[cfg(unix)]
         {
             use std::os::unix::fs::PermissionsExt;
@@ -153,7 +180,8 @@ mod tests {
             "quick",
             Path::new("/data/out"),
             Path::new("/data"),
-        );
+        )
+        .unwrap();
         let n = cells(&plan).len();
         assert!(s[0].1.contains(&format!("#SBATCH --array=0-{}", n - 1)));
         assert!(s[0]

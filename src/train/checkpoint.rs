@@ -14,11 +14,71 @@ use crate::gaussians::Gaussians;
 use crate::optim::{Adam, AdamConfig, N_GROUPS};
 use crate::render::RenderSettings;
 
+/// What a checkpoint belongs to. `train --resume` computes the same record from the run's
+/// `config.json` and the dataset it is given and refuses to continue when any field differs.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Identity {
+    /// The preset (`unispine`, `3dgs`, ...).
+    pub method: String,
+    /// The intensity model (`rirf-paper`, `sh`, ...): it gives the features their meaning.
+    pub color: String,
+    pub seed: u64,
+    /// [`crate::dataset::Dataset::fingerprint`] of the training data.
+    pub dataset: String,
+    /// [`crate::fingerprint::config`] of the run's config (every setting but the data path).
+    pub config: String,
+}
+
+impl Identity {
+    /// Error naming each field in which this (a checkpoint's) identity differs from `want`
+    /// (the run being resumed); `path` is the checkpoint.
+    pub fn check(&self, path: &Path, want: &Identity) -> Result<()> {
+        let mut diff = Vec::new();
+        let mut cmp = |field: &str, got: String, wanted: String, what: &str| {
+            if got != wanted {
+                diff.push(format!(
+                    "{field}: the checkpoint's is {got}, {what} {wanted}"
+                ));
+            }
+        };
+        let cfg = "the run's config.json says";
+        cmp("method", self.method.clone(), want.method.clone(), cfg);
+        cmp("color", self.color.clone(), want.color.clone(), cfg);
+        cmp("seed", self.seed.to_string(), want.seed.to_string(), cfg);
+        cmp(
+            "dataset",
+            self.dataset.clone(),
+            want.dataset.clone(),
+            "the dataset given has",
+        );
+        if diff.is_empty() && self.config != want.config {
+            diff.push(format!(
+                "config: config.json changed since the checkpoint was written (fingerprint {} \
+                 then, {} now)",
+                self.config, want.config
+            ));
+        }
+        if diff.is_empty() {
+            return Ok(());
+        }
+        Err(Error::format(
+            path,
+            "identity",
+            format!(
+                "belongs to another run, refused: {} (start a new run instead of --resume)",
+                diff.join("; ")
+            ),
+        ))
+    }
+}
+
 /// Everything a resumed run needs to continue with the same bits: parameters, Adam moments and
 /// step counts, densification statistics, the view order (random generator position and the
-/// views left in the stack), the evaluations, times and log so far.
+/// views left in the stack), the evaluations, times and log so far, and the run it belongs to.
 #[derive(Clone, Debug)]
 pub struct Checkpoint {
+    /// The run it belongs to.
+    pub identity: Identity,
     /// Iterations completed.
     pub iteration: usize,
     /// Render settings of the model at this point.
@@ -38,13 +98,14 @@ pub struct Checkpoint {
 }
 
 const CKPT_MAGIC: &[u8] = b"unispine-checkpoint\n";
-const CKPT_VERSION: u32 = 1;
+const CKPT_VERSION: u32 = 2;
 /// f32 values per Gaussian in one parameter-shaped array.
 const PER_G: usize = 3 + 3 + 4 + 1 + N_FEATURES;
 
 #[derive(Serialize, Deserialize)]
 struct CkptHeader {
     format_version: u32,
+    identity: Identity,
     iteration: usize,
     n_gaussians: usize,
     render: RenderSettings,
@@ -94,11 +155,13 @@ impl Checkpoint {
     /// The checkpoint as bytes: magic line, header length (u64 LE), header JSON, the log, then
     /// little-endian arrays: parameters, first and second Adam moments (each per Gaussian:
     /// mean 3, log-scale 3, quaternion 4, opacity logit 1, features 16, f32), the statistics'
-    /// gradient sums (f64), visibility counts and max radii (u32).
+    /// gradient sums (f64), visibility counts and max radii (u32); then the checksum of
+    /// everything before it ([`crate::fsio::seal`]). The header records the run's [`Identity`].
     pub fn to_bytes(&self) -> Vec<u8> {
         let n = self.state.len();
         let h = CkptHeader {
             format_version: CKPT_VERSION,
+            identity: self.identity.clone(),
             iteration: self.iteration,
             n_gaussians: n,
             render: self.render.clone(),
@@ -128,6 +191,7 @@ impl Checkpoint {
         st.max_radius
             .iter()
             .for_each(|v| buf.extend_from_slice(&v.to_le_bytes()));
+        crate::fsio::seal(&mut buf);
         buf
     }
 
@@ -192,6 +256,7 @@ impl Checkpoint {
             .check_finite()
             .map_err(|e| bad("parameters", e.to_string()))?;
         Ok(Checkpoint {
+            identity: h.identity,
             iteration: h.iteration,
             render: h.render,
             state: TrainState {

@@ -279,7 +279,7 @@ impl RunDir {
     /// Read `checkpoint.bin`.
     pub fn read_checkpoint(&self) -> Result<Checkpoint> {
         let p = self.path(CHECKPOINT);
-        let b = std::fs::read(&p).map_err(|e| Error::io(&p, e))?;
+        let b = fsio::read_bounded(&p, fsio::MAX_CHECKPOINT_BYTES)?;
         Checkpoint::from_bytes(&p, &b)
     }
 
@@ -401,8 +401,16 @@ mod tests {
     }
 
     #[test]
-    fn checkpoint_round_trips_and_refuses_truncation() {
+    fn checkpoint_round_trips_and_refuses_truncation_corruption_and_other_runs() {
+        use crate::train::checkpoint::Identity;
         let c = Checkpoint {
+            identity: crate::train::checkpoint::Identity {
+                method: "unispine".into(),
+                color: "rirf-paper".into(),
+                seed: 3,
+                dataset: "0123456789abcdef".into(),
+                config: "fedcba9876543210".into(),
+            },
             iteration: 12,
             render: RenderSettings::default(),
             state: state(3),
@@ -422,8 +430,40 @@ mod tests {
         assert_eq!(back.state.adam, c.state.adam);
         assert_eq!(back.state.stats, c.state.stats);
         assert_eq!(back.rng_word_pos, c.rng_word_pos);
+        assert_eq!(back.identity, c.identity);
         let e = Checkpoint::from_bytes(p, &b[..b.len() - 1]).unwrap_err();
-        assert!(e.to_string().contains("n_gaussians"), "{e}");
+        assert!(e.to_string().contains("checksum"), "{e}");
+        // A flipped bit anywhere after the magic line (header, log, any array, the checksum).
+        for i in (20..b.len()).step_by(7) {
+            let mut f = b.clone();
+            f[i] ^= 0x04;
+            let e = Checkpoint::from_bytes(p, &f).unwrap_err();
+            assert!(e.to_string().contains("checksum"), "byte {i}: {e}");
+        }
+        // Another run: each field of the identity is named when it differs.
+        let mut other = c.identity.clone();
+        assert!(back.identity.check(p, &other).is_ok());
+        for (field, edit) in [
+            (
+                "method",
+                (|o: &mut Identity| o.method = "3dgs".into()) as fn(&mut Identity),
+            ),
+            ("color", |o| o.color = "sh".into()),
+            ("seed", |o| o.seed = 4),
+            ("dataset", |o| o.dataset = "ffffffffffffffff".into()),
+            ("config.json changed", |o| {
+                o.config = "0000000000000000".into()
+            }),
+        ] {
+            let mut o = c.identity.clone();
+            edit(&mut o);
+            let e = back.identity.check(p, &o).unwrap_err().to_string();
+            assert!(e.contains(field) && e.contains("c.bin"), "{field}: {e}");
+        }
+        other.seed = 9;
+        other.method = "xgaussian".into();
+        let e = back.identity.check(p, &other).unwrap_err().to_string();
+        assert!(e.contains("seed") && e.contains("method"), "{e}");
         let e = Checkpoint::from_bytes(p, b"nope").unwrap_err();
         assert!(e.to_string().contains("magic"), "{e}");
     }

@@ -17,6 +17,7 @@ use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
+use super::checkpoint::Identity;
 use super::run_dir::{Checkpoint, EvalPoint, Metrics, RunDir, LOG_HEADER};
 use super::{Event, IterRate, TrainConfig, Trainer};
 use crate::dataset::Dataset;
@@ -41,6 +42,22 @@ struct Session<'a> {
     eval_time_s: f64,
     /// Training wall time of earlier sessions of this run.
     time_before_s: f64,
+    /// The run the checkpoints belong to (computed only when there is a run folder).
+    identity: Identity,
+}
+
+/// The identity of a run of `cfg` on `ds` (what its checkpoints record and `resume` checks).
+pub fn identity(cfg: &TrainConfig, ds: &Dataset) -> Identity {
+    Identity {
+        method: cfg.method.name().to_string(),
+        color: serde_json::to_value(cfg.color)
+            .ok()
+            .and_then(|v| v.as_str().map(str::to_string))
+            .unwrap_or_default(),
+        seed: cfg.seed,
+        dataset: ds.fingerprint(),
+        config: crate::fingerprint::config(cfg),
+    }
 }
 
 /// Train `cfg` on `ds`, writing the run folder `out` (when given; its previous run files are
@@ -83,6 +100,10 @@ pub fn run_with(
         evals: Vec::new(),
         eval_time_s: 0.0,
         time_before_s: 0.0,
+        identity: match &dir {
+            Some(_) => identity(cfg, ds),
+            None => Identity::default(),
+        },
     };
     if let Some(d) = &dir {
         d.write_checkpoint(&s.checkpoint(0.0))?;
@@ -101,6 +122,9 @@ pub fn resume(
     rd.check_resumable()?;
     let cfg: TrainConfig = rd.read_config()?;
     let c = rd.read_checkpoint()?;
+    let id = identity(&cfg, ds);
+    c.identity
+        .check(&rd.path(super::run_dir::CHECKPOINT), &id)?;
     let mut tr = Trainer::new(cfg, ds)?;
     tr.restore(&c)?;
     let s = Session {
@@ -109,6 +133,7 @@ pub fn resume(
         evals: c.evals,
         eval_time_s: c.eval_time_s,
         time_before_s: c.train_time_s,
+        identity: id,
     };
     drive(s, Some(&rd), ctl, on_event)
 }
@@ -117,6 +142,7 @@ impl Session<'_> {
     fn checkpoint(&self, train_time_s: f64) -> Checkpoint {
         let (rng_word_pos, view_stack) = self.tr.view_order();
         Checkpoint {
+            identity: self.identity.clone(),
             iteration: self.tr.iteration,
             render: self.tr.settings(self.tr.iteration.max(1)),
             state: self.tr.state.clone(),

@@ -67,3 +67,103 @@ pub fn write_geometry(
     );
     std::fs::write(path, text).unwrap();
 }
+
+/// Exit code, stdout and stderr of a run under limits.
+#[derive(Debug)]
+pub struct Limited {
+    pub code: i32,
+    pub stdout: String,
+    pub stderr: String,
+}
+
+/// Run `unispine ARGS` in `cwd` under a virtual-memory limit of `mem_mib` MiB (`ulimit -v`) and a
+/// wall-time limit of `secs` seconds (the test fails if it is exceeded), with extra environment
+/// variables `env` (`PATH` among them, for stub commands).
+pub fn run_limited<S: AsRef<OsStr>>(
+    args: &[S],
+    cwd: &Path,
+    env: &[(&str, &str)],
+    mem_mib: u64,
+    secs: u64,
+) -> Limited {
+    use std::io::Read;
+    let mut script = format!("ulimit -v {}; exec \"$0\"", mem_mib * 1024);
+    for k in 1..=args.len() {
+        script += &format!(" \"${{{k}}}\"");
+    }
+    let mut c = Command::new("sh");
+    c.arg("-c")
+        .arg(script)
+        .arg(env!("CARGO_BIN_EXE_unispine"))
+        .args(args)
+        .current_dir(cwd)
+        .env("RAYON_NUM_THREADS", "2")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped());
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    let mut child = c.spawn().expect("spawn sh");
+    let (mut out, mut err) = (child.stdout.take().unwrap(), child.stderr.take().unwrap());
+    let t_out = std::thread::spawn(move || {
+        let mut s = String::new();
+        out.read_to_string(&mut s).ok();
+        s
+    });
+    let t_err = std::thread::spawn(move || {
+        let mut s = String::new();
+        err.read_to_string(&mut s).ok();
+        s
+    });
+    let t0 = std::time::Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if t0.elapsed().as_secs() > secs {
+            child.kill().ok();
+            panic!("`unispine` did not finish within {secs} s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    Limited {
+        code: status.code().unwrap_or(-1),
+        stdout: t_out.join().unwrap(),
+        stderr: t_err.join().unwrap(),
+    }
+}
+
+/// A listing of every file below `dir` with its size and FNV-1a checksum, sorted (symlinks
+/// listed with their target, not followed): compare it before and after a command to show that
+/// the command changed nothing there.
+pub fn tree_listing(dir: &Path) -> Vec<String> {
+    fn walk(root: &Path, d: &Path, out: &mut Vec<String>) {
+        let Ok(rd) = std::fs::read_dir(d) else {
+            return;
+        };
+        for e in rd.flatten() {
+            let p = e.path();
+            let rel = p.strip_prefix(root).unwrap().display().to_string();
+            let m = std::fs::symlink_metadata(&p).unwrap();
+            if m.file_type().is_symlink() {
+                out.push(format!(
+                    "{rel} -> {}",
+                    std::fs::read_link(&p).unwrap().display()
+                ));
+            } else if m.is_dir() {
+                out.push(format!("{rel}/"));
+                walk(root, &p, out);
+            } else {
+                let b = std::fs::read(&p).unwrap();
+                let h = b.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &x| {
+                    (h ^ x as u64).wrapping_mul(0x0000_0100_0000_01b3)
+                });
+                out.push(format!("{rel} {} {h:016x}", b.len()));
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(dir, dir, &mut out);
+    out.sort();
+    out
+}

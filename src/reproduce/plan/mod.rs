@@ -49,7 +49,12 @@ use toml::Spanned;
 
 use crate::error::{Error, Result};
 
+pub mod names;
+mod slurm_spec;
 mod train_flags;
+
+use slurm_spec::RawSlurm;
+pub use slurm_spec::SlurmSpec;
 
 use train_flags::{check_train_args, flags_to_args, value_arg, Flags};
 pub use train_flags::{TrainSchema, HARNESS_FLAGS};
@@ -92,24 +97,6 @@ pub struct MethodSpec {
 pub struct Sweep {
     pub flag: String,
     pub values: Vec<String>,
-}
-
-/// Slurm resources per array task.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SlurmSpec {
-    pub cpus_per_task: usize,
-    pub mem: String,
-    pub time: String,
-}
-
-impl Default for SlurmSpec {
-    fn default() -> Self {
-        SlurmSpec {
-            cpus_per_task: 2,
-            mem: "4G".into(),
-            time: "24:00:00".into(),
-        }
-    }
 }
 
 /// A parsed, validated plan.
@@ -180,17 +167,6 @@ struct RawSweep {
     values: Vec<Spanned<toml::Value>>,
 }
 
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawSlurm {
-    #[serde(default)]
-    cpus_per_task: Option<usize>,
-    #[serde(default)]
-    mem: Option<String>,
-    #[serde(default)]
-    time: Option<String>,
-}
-
 /// 1-based line of byte offset `at` in `text`.
 pub fn line_of(text: &str, at: usize) -> usize {
     text.as_bytes()[..at.min(text.len())]
@@ -219,23 +195,18 @@ impl Plan {
         })?;
         let _ = &raw.description;
         let name = raw.name.get_ref().trim().to_string();
-        if name.is_empty() || name.contains(['/', '\\']) {
-            return Err(err_at(
-                file,
-                text,
-                raw.name.span(),
-                "name",
-                "must be a non-empty name without `/`".into(),
-            ));
+        if let Err(m) = names::check(&name) {
+            return Err(err_at(file, text, raw.name.span(), "name", m));
         }
         let iters = *raw.iters.get_ref();
-        if iters < 1 {
+        let max_iters = crate::train::settings::MAX_ITERATIONS as i64;
+        if !(1..=max_iters).contains(&iters) {
             return Err(err_at(
                 file,
                 text,
                 raw.iters.span(),
                 "iters",
-                "must be >= 1".into(),
+                format!("{iters} is outside [1, {max_iters}]"),
             ));
         }
         let field_iters = match &raw.field_iters {
@@ -262,8 +233,9 @@ impl Plan {
             },
         };
         let mut seeds = Vec::new();
+        let mut seen = std::collections::HashSet::new();
         for &s in raw.seeds.get_ref() {
-            if s < 0 || seeds.contains(&(s as u64)) {
+            if s < 0 || !seen.insert(s) {
                 return Err(err_at(
                     file,
                     text,
@@ -288,6 +260,28 @@ impl Plan {
         let mut variants: BTreeMap<String, MethodSpec> = BTreeMap::new();
         for (vname, body) in &raw.variants {
             let vn = vname.get_ref().clone();
+            if let Err(m) = names::check(&vn) {
+                return Err(err_at(
+                    file,
+                    text,
+                    vname.span(),
+                    "variants",
+                    format!("variant name {vn:?} {m}"),
+                ));
+            }
+            if let Some(other) = variants
+                .keys()
+                .chain(schema.methods.iter())
+                .find(|o| **o != vn && names::normalise(o) == names::normalise(&vn))
+            {
+                return Err(err_at(
+                    file,
+                    text,
+                    vname.span(),
+                    &format!("variants.{vn}"),
+                    format!("`{vn}` and `{other}` differ only in case (one folder on some disks)"),
+                ));
+            }
             if schema.methods.contains(&vn) {
                 return Err(err_at(
                     file,
@@ -392,7 +386,10 @@ impl Plan {
                     ),
                 ));
             };
-            if methods.iter().any(|x: &MethodSpec| x.name == *n) {
+            if methods
+                .iter()
+                .any(|x: &MethodSpec| names::normalise(&x.name) == names::normalise(n))
+            {
                 return Err(err_at(
                     file,
                     text,
@@ -421,16 +418,19 @@ impl Plan {
             let dn = d.get_ref().name.get_ref().clone();
             let key = format!("datasets.{dn}");
             let at_d = |msg: String| err_at(file, text, d.span(), &key, msg);
-            if dn.is_empty() || dn.contains(['/', '\\']) || dn.starts_with('.') {
+            if let Err(m) = names::check(&dn) {
                 return Err(err_at(
                     file,
                     text,
                     d.get_ref().name.span(),
                     "datasets.name",
-                    format!("`{dn}` is not a usable folder name"),
+                    format!("{dn:?} {m}"),
                 ));
             }
-            if datasets.iter().any(|x| x.name == dn) {
+            if datasets
+                .iter()
+                .any(|x| names::normalise(&x.name) == names::normalise(&dn))
+            {
                 return Err(at_d(format!("dataset `{dn}` is listed twice")));
             }
             let raw_d = d.get_ref();
@@ -507,6 +507,27 @@ impl Plan {
                 for v in &s_ref.values {
                     let a = value_arg(v.get_ref())
                         .map_err(|m| err_at(file, text, v.span(), "sweep.values", m))?;
+                    if let Err(m) = names::check_value(&a) {
+                        return Err(err_at(
+                            file,
+                            text,
+                            v.span(),
+                            "sweep.values",
+                            format!("value {a:?} {m}"),
+                        ));
+                    }
+                    if let Some(prev) = values
+                        .iter()
+                        .find(|p: &&String| names::normalise_value(p) == names::normalise_value(&a))
+                    {
+                        return Err(err_at(
+                            file,
+                            text,
+                            v.span(),
+                            "sweep.values",
+                            format!("{a:?} repeats {prev:?} (two cells would share one folder)"),
+                        ));
+                    }
                     let mut args = train_args.clone();
                     args.push(format!("--{flag}"));
                     args.push(a.clone());
@@ -546,14 +567,7 @@ impl Plan {
         };
         let slurm = match raw.slurm {
             None => SlurmSpec::default(),
-            Some(s) => {
-                let d = SlurmSpec::default();
-                SlurmSpec {
-                    cpus_per_task: s.cpus_per_task.unwrap_or(d.cpus_per_task).max(1),
-                    mem: s.mem.unwrap_or(d.mem),
-                    time: s.time.unwrap_or(d.time),
-                }
-            }
+            Some(s) => SlurmSpec::from_raw(s, file, text)?,
         };
         Ok(Plan {
             name,
@@ -578,21 +592,57 @@ impl Plan {
             return Plan::parse(text, &file, Path::new("."), schema);
         }
         let p = Path::new(name_or_path);
-        let text = std::fs::read_to_string(p).map_err(|e| {
-            if e.kind() == std::io::ErrorKind::NotFound && !name_or_path.ends_with(".toml") {
-                Error::invalid(
-                    "PLAN",
-                    format!(
-                        "`{name_or_path}` is neither a built-in plan ({}) nor a file",
-                        BUILTIN.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
-                    ),
-                )
-            } else {
-                Error::io(p, e)
-            }
-        })?;
+        if std::fs::symlink_metadata(p).is_err() && !name_or_path.ends_with(".toml") {
+            return Err(Error::invalid(
+                "PLAN",
+                format!(
+                    "`{name_or_path}` is neither a built-in plan ({}) nor a file",
+                    BUILTIN.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
+                ),
+            ));
+        }
+        let text = crate::fsio::read_text_bounded(p, MAX_PLAN_BYTES)?;
         let base = p.parent().unwrap_or(Path::new(".")).to_path_buf();
         Plan::parse(&text, p, &base, schema)
+    }
+}
+
+/// Largest plan file read: 1 MiB.
+pub const MAX_PLAN_BYTES: u64 = 1 << 20;
+
+/// Most cells a plan may have unless raised (`unispine reproduce --max-cells N`).
+pub const DEFAULT_MAX_CELLS: usize = 10_000;
+
+impl Plan {
+    /// Number of cells (datasets x methods x sweep values x seeds), saturating.
+    pub fn n_cells(&self) -> usize {
+        [
+            self.datasets.len(),
+            self.methods.len(),
+            self.sweep.as_ref().map_or(1, |s| s.values.len()),
+            self.seeds.len(),
+        ]
+        .iter()
+        .fold(1usize, |a, &b| a.saturating_mul(b))
+    }
+
+    /// Error when the plan has more than `max` cells (before any cell is listed or run).
+    pub fn check_cells(&self, max: usize) -> Result<()> {
+        let n = self.n_cells();
+        if n > max {
+            return Err(Error::invalid(
+                "--max-cells",
+                format!(
+                    "plan `{}` has {n} cells ({} datasets x {} methods x {} sweep values x {}                      seeds), more than the {max} allowed; raise the limit with --max-cells {n}                      if that is meant",
+                    self.name,
+                    self.datasets.len(),
+                    self.methods.len(),
+                    self.sweep.as_ref().map_or(1, |s| s.values.len()),
+                    self.seeds.len()
+                ),
+            ));
+        }
+        Ok(())
     }
 }
 
