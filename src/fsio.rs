@@ -142,8 +142,8 @@ fn unseal<'a>(path: &Path, bytes: &'a [u8]) -> Result<&'a [u8]> {
         Error::format(
             path,
             "checksum",
-            "does not match the contents: the file is corrupt (a changed byte or a partial \
-             copy) or was written by an older unispine without a checksum",
+            "does not match the contents: the file is corrupt or truncated (a changed byte \
+             or a partial copy), or was written by an older unispine without a checksum",
         )
     };
     let split = bytes.len().checked_sub(8).ok_or_else(corrupt)?;

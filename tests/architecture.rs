@@ -1,0 +1,156 @@
+//! `ARCHITECTURE.md`'s equation -> code -> test index names only files and items that exist:
+//! every path (braces and `*` expanded) matches a file or folder, every item after a path is a
+//! word of that file, every `module::path::tests` is a module with tests, every
+//! `tests/FILE.rs::name` is a function of that file.
+
+use std::path::{Path, PathBuf};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// `a{b,c}d` -> [`abd`, `acd`] (one level of braces, repeated).
+fn expand(s: &str) -> Vec<String> {
+    match (s.find('{'), s.find('}')) {
+        (Some(a), Some(b)) if a < b => s[a + 1..b]
+            .split(',')
+            .flat_map(|alt| expand(&format!("{}{alt}{}", &s[..a], &s[b + 1..])))
+            .collect(),
+        _ => vec![s.to_string()],
+    }
+}
+
+/// Whether `name` matches `pat` with `*` standing for any run of characters.
+fn wild(pat: &str, name: &str) -> bool {
+    match pat.split_once('*') {
+        None => pat == name,
+        Some((head, tail)) => {
+            name.starts_with(head)
+                && (0..=name.len() - head.len()).any(|k| wild(tail, &name[head.len() + k..]))
+        }
+    }
+}
+
+/// Existing paths below `base` matching the `/`-separated pattern.
+fn glob(base: &Path, pat: &str) -> Vec<PathBuf> {
+    let mut found = vec![base.to_path_buf()];
+    for seg in pat.split('/').filter(|s| !s.is_empty()) {
+        let mut next = Vec::new();
+        for p in &found {
+            if seg.contains('*') {
+                for e in std::fs::read_dir(p).into_iter().flatten().flatten() {
+                    if wild(seg, &e.file_name().to_string_lossy()) {
+                        next.push(e.path());
+                    }
+                }
+            } else if p.join(seg).exists() {
+                next.push(p.join(seg));
+            }
+        }
+        found = next;
+    }
+    found
+}
+
+/// The file of module path `segs` below `src/`, and how many segments it used.
+fn module_file(segs: &[&str]) -> Option<(PathBuf, usize)> {
+    let src = root().join("src");
+    (1..=segs.len()).rev().find_map(|k| {
+        let rel = segs[..k].join("/");
+        [src.join(format!("{rel}.rs")), src.join(&rel).join("mod.rs")]
+            .into_iter()
+            .find(|p| p.is_file())
+            .map(|p| (p, k))
+    })
+}
+
+fn has_word(text: &str, w: &str) -> bool {
+    text.match_indices(w).any(|(i, _)| {
+        let before = text[..i].chars().next_back();
+        let after = text[i + w.len()..].chars().next();
+        let edge = |c: Option<char>| c.is_none_or(|c| !(c.is_alphanumeric() || c == '_'));
+        edge(before) && edge(after)
+    })
+}
+
+#[test]
+fn every_file_and_item_the_index_names_exists() {
+    let doc = std::fs::read_to_string(root().join("ARCHITECTURE.md")).unwrap();
+    let table = doc
+        .split("## Equation -> code -> test")
+        .nth(1)
+        .expect("the index section")
+        .split("\n## ")
+        .next()
+        .unwrap();
+    let mut checked = 0;
+    let mut missing = Vec::new();
+    for row in table.lines().filter(|l| l.starts_with('|')).skip(2) {
+        for cell in row.split('|').skip(2) {
+            let mut last_files: Vec<PathBuf> = Vec::new();
+            for span in cell.split('`').skip(1).step_by(2) {
+                if span.contains(' ') {
+                    continue; // a command line, not a name
+                }
+                checked += 1;
+                if let Some((file, item)) = span.split_once(".rs::") {
+                    let p = root().join(format!("{file}.rs"));
+                    let ok = std::fs::read_to_string(&p)
+                        .is_ok_and(|t| t.contains(&format!("fn {item}(")));
+                    if !ok {
+                        missing.push(span.to_string());
+                    }
+                } else if span.contains("::") {
+                    let segs: Vec<&str> = span.split("::").collect();
+                    let ok = module_file(&segs).is_some_and(|(file, used)| {
+                        let text = std::fs::read_to_string(&file).unwrap();
+                        let dir = file.with_extension("");
+                        let dir = if file.ends_with("mod.rs") {
+                            file.parent().unwrap().to_path_buf()
+                        } else {
+                            dir
+                        };
+                        segs[used..].iter().all(|s| {
+                            has_word(&text, s)
+                                || (*s == "tests" && dir.join("tests.rs").is_file())
+                        })
+                    });
+                    if !ok {
+                        missing.push(span.to_string());
+                    }
+                } else if span.contains('/') || span.ends_with(".rs") || span.ends_with(".py") {
+                    let mut files = Vec::new();
+                    for pat in expand(span) {
+                        for base in [root(), root().join("src")] {
+                            files.extend(glob(&base, &pat));
+                        }
+                    }
+                    if files.is_empty() {
+                        missing.push(span.to_string());
+                    }
+                    last_files = files.into_iter().filter(|p| p.is_file()).collect();
+                } else if !last_files.is_empty() {
+                    let ok = last_files.iter().any(|f| {
+                        std::fs::read_to_string(f).is_ok_and(|t| has_word(&t, span))
+                    });
+                    if !ok {
+                        missing.push(format!("{span} (in {:?})", last_files));
+                    }
+                }
+            }
+        }
+    }
+    assert!(checked > 40, "only {checked} names found: is the table still there?");
+    assert!(missing.is_empty(), "ARCHITECTURE.md names what does not exist: {missing:#?}");
+}
+
+#[test]
+fn the_checker_sees_a_wrong_name() {
+    assert!(wild("eq0*-vjp", "eq01-covariance-vjp"));
+    assert!(!wild("eq0*-vjp", "eq01-covariance"));
+    assert_eq!(expand("math/{quat,covariance}.rs").len(), 2);
+    assert!(module_file(&["render", "project", "tests"]).is_some());
+    assert!(!glob(&root().join("src"), "train/no_such_file.rs").iter().any(|p| p.exists()));
+    assert!(has_word("pub struct Metrics {", "Metrics"));
+    assert!(!has_word("pub struct MetricsX {", "Metrics"));
+}
