@@ -14,7 +14,8 @@
 //!   -> optim (Adam, schedules) -> densify -> eval (PSNR, SSIM, fps) -> train -> report
 //! ```
 
-// The library never prints (progress leaves as events, `train::event`); only `cli` does.
+// The library never prints (progress leaves as events, `train::event`); only the binary
+// (`src/main.rs` and its `cli` modules) does.
 #![cfg_attr(not(test), warn(clippy::print_stdout, clippy::print_stderr))]
 
 // Foundations shared by every stage.
@@ -85,10 +86,6 @@ pub mod reproduce;
 
 /// Numerical audits: gradient checks against finite differences, benchmark scenes.
 pub mod audit;
-
-// Front end.
-#[allow(clippy::print_stdout, clippy::print_stderr)]
-pub mod cli;
 
 pub use error::{Error, Result};
 pub use real::Real;

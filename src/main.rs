@@ -2,6 +2,11 @@
 
 use clap::Parser;
 
+// The front end: flags, progress bars and printing. It is part of the binary, not of the
+// library, so the library (and the Python module built on it) holds no front-end code.
+#[allow(clippy::print_stdout, clippy::print_stderr)]
+mod cli;
+
 fn main() {
     // Output piped into a reader that stops early (`unispine reproduce --list | head`) ends the
     // process quietly, as for other Unix tools, instead of a panic on the failed write.
@@ -21,8 +26,8 @@ fn main() {
         libc::mallopt(libc::M_MMAP_THRESHOLD, 64 << 20);
         libc::mallopt(libc::M_TRIM_THRESHOLD, 256 << 20);
     }
-    let cli = unispine::cli::Cli::parse();
-    if let Err(e) = unispine::cli::run(cli) {
+    let cli = cli::Cli::parse();
+    if let Err(e) = cli::run(cli) {
         eprintln!("error: {e:#}");
         std::process::exit(1);
     }

@@ -111,8 +111,7 @@ fn every_file_and_item_the_index_names_exists() {
                             dir
                         };
                         segs[used..].iter().all(|s| {
-                            has_word(&text, s)
-                                || (*s == "tests" && dir.join("tests.rs").is_file())
+                            has_word(&text, s) || (*s == "tests" && dir.join("tests.rs").is_file())
                         })
                     });
                     if !ok {
@@ -130,9 +129,9 @@ fn every_file_and_item_the_index_names_exists() {
                     }
                     last_files = files.into_iter().filter(|p| p.is_file()).collect();
                 } else if !last_files.is_empty() {
-                    let ok = last_files.iter().any(|f| {
-                        std::fs::read_to_string(f).is_ok_and(|t| has_word(&t, span))
-                    });
+                    let ok = last_files
+                        .iter()
+                        .any(|f| std::fs::read_to_string(f).is_ok_and(|t| has_word(&t, span)));
                     if !ok {
                         missing.push(format!("{span} (in {:?})", last_files));
                     }
@@ -140,8 +139,14 @@ fn every_file_and_item_the_index_names_exists() {
             }
         }
     }
-    assert!(checked > 40, "only {checked} names found: is the table still there?");
-    assert!(missing.is_empty(), "ARCHITECTURE.md names what does not exist: {missing:#?}");
+    assert!(
+        checked > 40,
+        "only {checked} names found: is the table still there?"
+    );
+    assert!(
+        missing.is_empty(),
+        "ARCHITECTURE.md names what does not exist: {missing:#?}"
+    );
 }
 
 #[test]
@@ -150,7 +155,9 @@ fn the_checker_sees_a_wrong_name() {
     assert!(!wild("eq0*-vjp", "eq01-covariance"));
     assert_eq!(expand("math/{quat,covariance}.rs").len(), 2);
     assert!(module_file(&["render", "project", "tests"]).is_some());
-    assert!(!glob(&root().join("src"), "train/no_such_file.rs").iter().any(|p| p.exists()));
+    assert!(!glob(&root().join("src"), "train/no_such_file.rs")
+        .iter()
+        .any(|p| p.exists()));
     assert!(has_word("pub struct Metrics {", "Metrics"));
     assert!(!has_word("pub struct MetricsX {", "Metrics"));
 }

@@ -24,7 +24,10 @@ fn the_quick_plan_at_seed_0_gives_the_committed_bits() {
     let d = tempfile::tempdir().unwrap();
     let plan = common::cli::ok(&["reproduce", "--show", "quick"]);
     let one_seed = plan.replace("seeds = [0, 1]", "seeds = [0]");
-    assert_ne!(plan, one_seed, "the quick plan no longer lists seeds [0, 1]");
+    assert_ne!(
+        plan, one_seed,
+        "the quick plan no longer lists seeds [0, 1]"
+    );
     let p = d.path().join("quick-seed0.toml");
     std::fs::write(&p, one_seed).unwrap();
     let out = d.path().join("out");

@@ -3,16 +3,16 @@
 //!
 //! Kinds:
 //! - `render`: forward and forward + backward of the rasterizer in f32 on the CT-like scenes of
-//!   [`crate::audit::bench`], for each Gaussian count and square detector size; prints median
+//!   [`unispine::audit::bench`], for each Gaussian count and square detector size; prints median
 //!   times, Gaussian-pixel blends per second, and the same throughput of the naive per-pixel
 //!   reference measured on a smaller case in the same run, scaled per blend; the SIMD path used
-//!   ([`crate::simd::Simd::active`]) and the arithmetic limit of the work: blends x the kernels'
+//!   ([`unispine::simd::Simd::active`]) and the arithmetic limit of the work: blends x the kernels'
 //!   flops per blend over the peak f32 rate measured in the same run
-//!   ([`crate::simd::peak_run`]), and the fraction of it reached; under each case, the CPU and
-//!   wall time of each phase ([`crate::audit::bench::RENDER_PHASES`]) and the lanes the tile
+//!   ([`unispine::simd::peak_run`]), and the fraction of it reached; under each case, the CPU and
+//!   wall time of each phase ([`unispine::audit::bench::RENDER_PHASES`]) and the lanes the tile
 //!   kernels evaluated against the blends.
 //!
-//! - `field`: the neural-field baselines ([`crate::field::bench`]): the peak f32 rate of
+//! - `field`: the neural-field baselines ([`unispine::field::bench`]): the peak f32 rate of
 //!   independent multiplies and adds on one and on all threads, the MLP forward + backward at
 //!   the NAF width (rows = the preset's rays x samples) in Gflop/s and as a fraction of that
 //!   peak (the widest path and the scalar path) and at the NeRF width (the widest path), each
@@ -20,10 +20,10 @@
 //!   after the full NAF configuration's iterations.
 //!
 //! - `train`: where one training iteration of the `unispine` preset goes
-//!   ([`crate::audit::train_bench`]): ms and % of the step per stage at each detector size,
+//!   ([`unispine::audit::train_bench`]): ms and % of the step per stage at each detector size,
 //!   CPU time, and the share outside the rasterizer against the 25 % target.
 //!
-//! - `drr`: the DRR projectors ([`crate::drr::bench`]): per projector, view (AP, lateral) and
+//! - `drr`: the DRR projectors ([`unispine::drr::bench`]): per projector, view (AP, lateral) and
 //!   detector size, the first and the median extra view on each instruction set, the per-ray
 //!   loops (`scalar`, the implementation before the vector kernels) measured in the same run as
 //!   the reference of the speed-ups; rays/s, voxel steps or samples per second, peak resident
@@ -34,10 +34,10 @@ use anyhow::{bail, Context};
 
 use std::time::Instant;
 
-use crate::audit::bench::{
+use unispine::audit::bench::{
     process_cpu_seconds, time_naive, time_render, RenderTiming, BOX_MM, RENDER_PHASES,
 };
-use crate::render::composite;
+use unispine::render::composite;
 
 /// Arguments of `unispine bench`.
 #[derive(Debug, clap::Args)]
@@ -119,15 +119,15 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
     } else {
         args.sizes.clone()
     };
-    crate::audit::bench::check_render_cases(&args.gaussians, &sizes, args.reps)?;
+    unispine::audit::bench::check_render_cases(&args.gaussians, &sizes, args.reps)?;
     println!(
         "render benchmark: CT-like box of {BOX_MM} mm, cone beam, f32, paper RIRF, {} threads, \
          median of {} reps",
         rayon::current_num_threads(),
         args.reps
     );
-    let simd = crate::simd::Simd::active();
-    let supported: Vec<&str> = crate::simd::Simd::supported_paths()
+    let simd = unispine::simd::Simd::active();
+    let supported: Vec<&str> = unispine::simd::Simd::supported_paths()
         .iter()
         .map(|p| p.name())
         .collect();
@@ -136,7 +136,7 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
         simd.name(),
         supported.join(", ")
     );
-    if let Err(e) = crate::simd::Simd::from_env() {
+    if let Err(e) = unispine::simd::Simd::from_env() {
         bail!("{e}");
     }
     // Naive per-pixel reference and the machine's peak, measured in this run.
@@ -152,7 +152,7 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
         let threads = rayon::current_num_threads();
         let cpu0 = process_cpu_seconds();
         let t0 = Instant::now();
-        let flops = crate::simd::peak_run(simd, threads, 100_000_000) as f64;
+        let flops = unispine::simd::peak_run(simd, threads, 100_000_000) as f64;
         let wall = t0.elapsed().as_secs_f64();
         let cpu = match (cpu0, process_cpu_seconds()) {
             (Some(a), Some(b)) if b > a => b - a,
@@ -254,9 +254,9 @@ fn print_phases(t: &RenderTiming) {
 }
 
 fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
-    use crate::drr::bench::{time_case, BENCH_REPS, BENCH_SIZES, TARGET_S};
-    use crate::drr::{MarchLanes, Method};
-    use crate::simd::Simd;
+    use unispine::drr::bench::{time_case, BENCH_REPS, BENCH_SIZES, TARGET_S};
+    use unispine::drr::{MarchLanes, Method};
+    use unispine::simd::Simd;
     let check = |flag: &str, v: usize, (lo, hi): (usize, usize)| {
         if v < lo || v > hi {
             bail!("{flag}: {v} is outside the allowed range [{lo}, {hi}]");
@@ -283,16 +283,15 @@ fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
         None => default_ct.exists().then(|| default_ct.to_path_buf()),
     };
     let vol = match &path {
-        Some(p) => {
-            crate::volume::load(p).with_context(|| format!("reading --volume {}", p.display()))?
-        }
+        Some(p) => unispine::volume::load(p)
+            .with_context(|| format!("reading --volume {}", p.display()))?,
         None => {
             let n = args.phantom;
-            let spec = crate::volume::phantom::PhantomSpec {
+            let spec = unispine::volume::phantom::PhantomSpec {
                 dims: [n, n, n],
                 ..Default::default()
             };
-            crate::volume::phantom::generate(&spec)?.0
+            unispine::volume::phantom::generate(&spec)?.0
         }
     };
     let vol_bytes = (vol.len() * 4) as f64;
@@ -335,7 +334,7 @@ fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
         "trilinear on avx512: {} lanes by default on this CPU (avx512/N = N lanes; 512-bit \
          operations {}), the other width timed too",
         default_lanes.count(),
-        if crate::simd::splits_512_bit() {
+        if unispine::simd::splits_512_bit() {
             "split in two halves"
         } else {
             "full width"

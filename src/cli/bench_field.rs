@@ -1,11 +1,11 @@
-//! `unispine bench field`: prints the figures of [`crate::field::bench`] and their ratios.
+//! `unispine bench field`: prints the figures of [`unispine::field::bench`] and their ratios.
 
 use anyhow::bail;
 
 use super::bench::BenchArgs;
-use crate::field::bench::{peak, time_iteration, time_mlp};
-use crate::field::{FieldConfig, PRESETS};
-use crate::simd::Simd;
+use unispine::field::bench::{peak, time_iteration, time_mlp};
+use unispine::field::{FieldConfig, PRESETS};
+use unispine::simd::Simd;
 
 /// Training views assumed for the presets' schedules (only the iteration count depends on it).
 const VIEWS: usize = 50;
@@ -128,7 +128,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         );
         iter_s.push((name.clone(), cfg.label(), t.wall, t.cpu));
         if name == "naf-full" {
-            hwm_naf_full = crate::eval::peak_memory_bytes();
+            hwm_naf_full = unispine::eval::peak_memory_bytes();
         }
     }
     if let Some(b) = hwm_naf_full {

@@ -1,11 +1,11 @@
-//! `unispine bench train`: prints [`crate::audit::train_bench`]'s stage breakdown of one
+//! `unispine bench train`: prints [`unispine::audit::train_bench`]'s stage breakdown of one
 //! training iteration per detector size and the share outside the rasterizer.
 
 use anyhow::{bail, Context};
 
 use super::bench::BenchArgs;
-use crate::audit::train_bench::{self, Clock, TrainBench};
-use crate::dataset::{store, Dataset};
+use unispine::audit::train_bench::{self, Clock, TrainBench};
+use unispine::dataset::{store, Dataset};
 
 /// Default detector sizes.
 const SIZES: [usize; 2] = [256, 1024];
@@ -28,7 +28,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         bail!("--sizes cannot be used with --data (the dataset's detector is the size)");
     }
     train_bench::check_train_cases(&sizes, iters, args.warmup, args.views)?;
-    if let Err(e) = crate::simd::Simd::from_env() {
+    if let Err(e) = unispine::simd::Simd::from_env() {
         bail!("{e}");
     }
     let model = match &args.model {
@@ -38,7 +38,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
             } else {
                 p.clone()
             };
-            let g = crate::gaussians::ply::read_ply::<f32>(&ply)
+            let g = unispine::gaussians::ply::read_ply::<f32>(&ply)
                 .with_context(|| format!("reading --model {}", ply.display()))?;
             Some(g)
         }
@@ -48,7 +48,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
         "train benchmark: `unispine` preset (20k schedule), f32, {} threads, SIMD path {}, {} \
          timed iterations after {}",
         rayon::current_num_threads(),
-        crate::simd::Simd::active().name(),
+        unispine::simd::Simd::active().name(),
         iters,
         match &args.model {
             Some(p) => format!(
@@ -173,7 +173,7 @@ fn print_case(b: &TrainBench) {
             c * 1e3
         );
     }
-    if let Some(m) = crate::eval::peak_memory_bytes() {
+    if let Some(m) = unispine::eval::peak_memory_bytes() {
         println!(
             "peak resident memory of the process so far: {:.0} MiB",
             m as f64 / 1048576.0

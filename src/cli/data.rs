@@ -10,13 +10,13 @@ use anyhow::{bail, Context};
 use clap::{Args, Subcommand, ValueEnum};
 
 use super::progress::Progress;
-use crate::dataset::generate::{self, GenerateOptions, Noise};
-use crate::dataset::{pickle, store, Dataset};
-use crate::drr::Method;
-use crate::geometry::Mode;
-use crate::volume::attenuation::{HuConversion, Normalization};
-use crate::volume::phantom::{self, PhantomSpec};
-use crate::volume::{resample, ultrasound, Volume};
+use unispine::dataset::generate::{self, GenerateOptions, Noise};
+use unispine::dataset::{pickle, store, Dataset};
+use unispine::drr::Method;
+use unispine::geometry::Mode;
+use unispine::volume::attenuation::{HuConversion, Normalization};
+use unispine::volume::phantom::{self, PhantomSpec};
+use unispine::volume::{resample, ultrasound, Volume};
 
 /// Arguments of `unispine data`.
 #[derive(Debug, Args)]
@@ -91,10 +91,10 @@ pub struct DatasetFlags {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Source-detector distance in mm (NAF / SAX-NeRF / UniSpine-GS: 1500).
-    #[arg(long, default_value_t = crate::geometry::DSD_MM)]
+    #[arg(long, default_value_t = unispine::geometry::DSD_MM)]
     pub dsd: f64,
     /// Source-origin distance in mm (NAF / SAX-NeRF / UniSpine-GS: 1000).
-    #[arg(long, default_value_t = crate::geometry::DSO_MM)]
+    #[arg(long, default_value_t = unispine::geometry::DSO_MM)]
     pub dso: f64,
     /// Beam shape.
     #[arg(long, value_enum, default_value = "cone")]
@@ -173,7 +173,7 @@ pub struct ImportArgs {
     pub out: PathBuf,
     /// Factor applied to the stored projections: NAF-family generators compute them in metres,
     /// 1000 converts to our mm. Use 1 for pickles already in mm.
-    #[arg(long, default_value_t = crate::geometry::DSO_MM)]
+    #[arg(long, default_value_t = unispine::geometry::DSO_MM)]
     pub projection_scale: f64,
 }
 
@@ -217,9 +217,9 @@ fn options(f: &DatasetFlags, units: &str, normalisation: &str) -> anyhow::Result
 }
 
 /// Turn an option-field error into one naming the command-line flag.
-fn flag_error(e: crate::error::Error) -> anyhow::Error {
+fn flag_error(e: unispine::error::Error) -> anyhow::Error {
     match e {
-        crate::error::Error::Invalid { field, msg } => {
+        unispine::error::Error::Invalid { field, msg } => {
             let flag = match field.as_str() {
                 "train_views" => "--train-views",
                 "test_views" => "--test-views",
@@ -254,7 +254,7 @@ fn make(vol: &Volume<f32>, opts: &GenerateOptions, out: &Path) -> anyhow::Result
 fn save(ds: &Dataset, out: &Path) -> anyhow::Result<()> {
     store::save(ds, out).with_context(|| format!("writing the dataset to {}", out.display()))?;
     let g = &ds.geometry;
-    let range = |views: &[crate::image2d::Image2d<f32>]| {
+    let range = |views: &[unispine::image2d::Image2d<f32>]| {
         views
             .iter()
             .flat_map(|v| v.data.iter())
@@ -375,16 +375,16 @@ fn run_ct(a: CtArgs) -> anyhow::Result<()> {
     let ids = parse_label_ids(&a.crop_labels)?;
     let _ = options(&a.data, "", "")?;
     let outs = store::output_files(&a.data.out);
-    crate::fsio::check_not_output("--volume", &a.volume, &outs)?;
+    unispine::fsio::check_not_output("--volume", &a.volume, &outs)?;
     if let Some(m) = &a.mask {
-        crate::fsio::check_not_output("--mask", m, &outs)?;
+        unispine::fsio::check_not_output("--mask", m, &outs)?;
     }
     eprintln!("loading {}", a.volume.display());
-    let mut vol = crate::volume::load(&a.volume)?;
+    let mut vol = unispine::volume::load(&a.volume)?;
     vol.check_finite(&format!("{}", a.volume.display()))?;
     if let Some(m) = &a.mask {
         eprintln!("loading {}", m.display());
-        let labels = crate::volume::load_labels(m)?;
+        let labels = unispine::volume::load_labels(m)?;
         vol = resample::crop_to_labels(&vol, &labels, &ids, a.margin_mm).with_context(|| {
             format!(
                 "cropping {} to the labels of {}",
@@ -418,9 +418,9 @@ fn run_ct(a: CtArgs) -> anyhow::Result<()> {
 
 fn run_us(a: UsArgs) -> anyhow::Result<()> {
     let _ = options(&a.data, "", "")?;
-    crate::fsio::check_not_output("--volume", &a.volume, &store::output_files(&a.data.out))?;
+    unispine::fsio::check_not_output("--volume", &a.volume, &store::output_files(&a.data.out))?;
     eprintln!("loading {}", a.volume.display());
-    let mut vol = crate::volume::load(&a.volume)?;
+    let mut vol = unispine::volume::load(&a.volume)?;
     vol.check_finite(&format!("{}", a.volume.display()))?;
     resample::recentre(&mut vol);
     let mut vol = cap_voxels(vol, a.resample)?;
@@ -437,7 +437,7 @@ fn run_us(a: UsArgs) -> anyhow::Result<()> {
 }
 
 fn run_import(a: ImportArgs) -> anyhow::Result<()> {
-    crate::fsio::check_not_output("--pickle", &a.pickle, &store::output_files(&a.out))?;
+    unispine::fsio::check_not_output("--pickle", &a.pickle, &store::output_files(&a.out))?;
     eprintln!("reading {}", a.pickle.display());
     let ds = pickle::import(
         &a.pickle,
@@ -446,7 +446,7 @@ fn run_import(a: ImportArgs) -> anyhow::Result<()> {
         },
     )
     .map_err(|e| match e {
-        crate::error::Error::Invalid { field, msg } if field == "projection_scale" => {
+        unispine::error::Error::Invalid { field, msg } if field == "projection_scale" => {
             anyhow::anyhow!("invalid --projection-scale: {msg}")
         }
         other => other.into(),

@@ -19,13 +19,13 @@ use ndarray::Array3;
 
 use crate::cli::progress::Progress;
 use crate::cli::render::Precision;
-use crate::drr::{self, Method};
-use crate::geometry::{self, ConeBeam, VoxelGrid};
-use crate::image2d::Image2d;
-use crate::preview::write_png;
-use crate::real::Real;
-use crate::volume::attenuation::HuConversion;
-use crate::volume::{self, Volume};
+use unispine::drr::{self, Method};
+use unispine::geometry::{self, ConeBeam, VoxelGrid};
+use unispine::image2d::Image2d;
+use unispine::preview::write_png;
+use unispine::real::Real;
+use unispine::volume::attenuation::HuConversion;
+use unispine::volume::{self, Volume};
 
 /// Arguments of `unispine drr`.
 #[derive(Debug, clap::Args)]
@@ -85,7 +85,7 @@ pub fn run(args: DrrArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
     let outs = [args.out.join("projections.npy"), args.out.join("drr.json")];
-    crate::fsio::check_not_output("--volume", &args.volume, &outs)?;
+    unispine::fsio::check_not_output("--volume", &args.volume, &outs)?;
     match args.precision {
         Precision::F32 => project_and_write::<f32>(&args, vol, &geo, &angles_deg, method),
         Precision::F64 => project_and_write::<f64>(&args, vol.cast(), &geo, &angles_deg, method),
@@ -138,7 +138,7 @@ fn project_and_write<R: Real>(
     }
     let (w, h) = (geo.n_detector[1], geo.n_detector[0]);
     // Views of an earlier, longer angle list would look like part of this one.
-    crate::fsio::remove_matching(&args.out, "view_", ".png")?;
+    unispine::fsio::remove_matching(&args.out, "view_", ".png")?;
     let mut stack = Array3::<f32>::zeros((views.len(), h, w));
     for (k, img) in views.iter().enumerate() {
         let img32: Vec<f32> = img.data.iter().map(|v| v.f64() as f32).collect();
@@ -159,7 +159,7 @@ fn project_and_write<R: Real>(
         "units": "line integral: mm x volume value (after --hu); row 0 = top (+z)",
         "volume": vol.provenance,
     });
-    crate::fsio::write_json_atomic(&args.out.join("drr.json"), &meta)?;
+    unispine::fsio::write_json_atomic(&args.out.join("drr.json"), &meta)?;
     println!("{} views [{h} x {w}] -> {}", views.len(), npy.display());
     Ok(())
 }

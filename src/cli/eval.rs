@@ -1,15 +1,15 @@
 //! `unispine eval --run RUN [--data DIR]`: re-evaluate a saved model (`model.ply`, or the
 //! checkpoint of a stopped run, read by [`RunDir::read_model`] with the render settings it
 //! records) on the test views of its dataset (the one recorded in the run, from any current
-//! folder), with the protocol of [`crate::eval`]; prints the metrics and writes `eval.json`
+//! folder), with the protocol of [`unispine::eval`]; prints the metrics and writes `eval.json`
 //! into the run folder.
 
 use std::path::PathBuf;
 
 use anyhow::{bail, Context};
 
-use crate::eval;
-use crate::train::run_dir::{RunDir, SavedModel};
+use unispine::eval;
+use unispine::train::run_dir::{RunDir, SavedModel};
 
 /// Arguments of `unispine eval`.
 #[derive(Debug, clap::Args)]
@@ -34,7 +34,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         (None, Some(d)) => d,
         (None, None) => bail!("the run's config.json names no dataset: pass --data"),
     };
-    let ds = crate::dataset::store::load(&data)
+    let ds = unispine::dataset::store::load(&data)
         .with_context(|| format!("the dataset of run {}", args.run.display()))?;
     let SavedModel {
         gaussians: g,
@@ -42,7 +42,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         path: ply_path,
         iteration,
     } = rd.read_model()?;
-    let targets = crate::dataset::targets::test_targets(&ds)?;
+    let targets = unispine::dataset::targets::test_targets(&ds)?;
     let r = eval::evaluate(&g, &ds, &targets, &settings)?;
     let (fps, secs) = eval::render_fps(&g, &ds, &settings)?;
     println!(

@@ -1,12 +1,12 @@
-//! `unispine gradcheck`: prints the gradient-check rows of [`crate::audit`] (every analytic
+//! `unispine gradcheck`: prints the gradient-check rows of [`unispine::audit`] (every analytic
 //! gradient against 5-point central finite differences in f64: the rasterizer's render rows
-//! and the neural-field rows of [`crate::audit::field`]) as a table, or with `--json` as a JSON
+//! and the neural-field rows of [`unispine::audit::field`]) as a table, or with `--json` as a JSON
 //! object, and exits non-zero when any relative error exceeds [`TOLERANCE`].
 
 use anyhow::bail;
 
-use crate::audit::{self, field, gradcheck, Row, TOLERANCE};
-use crate::render::ColorMode;
+use unispine::audit::{self, field, gradcheck, Row, TOLERANCE};
+use unispine::render::ColorMode;
 
 /// Arguments of `unispine gradcheck`.
 #[derive(Debug, clap::Args)]

@@ -18,13 +18,13 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context};
 use ndarray::Array2;
 
-use crate::gaussians::model::N_FEATURES;
-use crate::gaussians::ply::FeatureLayout;
-use crate::gaussians::{ply, Gaussians};
-use crate::geometry::{self, Camera};
-use crate::image2d::Image2d;
-use crate::real::Real;
-use crate::render::{self, ColorMode, RenderSettings};
+use unispine::gaussians::model::N_FEATURES;
+use unispine::gaussians::ply::FeatureLayout;
+use unispine::gaussians::{ply, Gaussians};
+use unispine::geometry::{self, Camera};
+use unispine::image2d::Image2d;
+use unispine::real::Real;
+use unispine::render::{self, ColorMode, RenderSettings};
 
 /// Arguments of `unispine render`.
 #[derive(Debug, clap::Args)]
@@ -111,7 +111,7 @@ fn load_model<R: Real>(
     args: &RenderArgs,
 ) -> anyhow::Result<(Gaussians<R>, PathBuf, Option<RenderSettings>, FeatureLayout)> {
     if let Some(run) = &args.run {
-        let m = crate::train::RunDir::open(run)?.read_model()?;
+        let m = unispine::train::RunDir::open(run)?.read_model()?;
         let layout = FeatureLayout {
             channels: 3,
             rest_per_channel: N_FEATURES - 1,
@@ -159,7 +159,7 @@ fn settings(
             .or(recorded.map(|r| r.background))
             .unwrap_or(def.background),
     };
-    if !crate::gaussians::rirf::valid_active(s.active_features) {
+    if !unispine::gaussians::rirf::valid_active(s.active_features) {
         bail!(
             "--active-features must be 1, 4, 9 or 16 (got {})",
             s.active_features
@@ -177,7 +177,7 @@ fn settings(
 /// The camera named by `--dataset/--view` or `--geometry/--angle-deg`.
 fn camera(args: &RenderArgs) -> anyhow::Result<Camera> {
     if let (Some(dir), Some(view)) = (&args.dataset, &args.view) {
-        let ds = crate::dataset::store::load(dir)?;
+        let ds = unispine::dataset::store::load(dir)?;
         let (split, k) = view
             .split_once(':')
             .and_then(|(s, k)| k.parse::<usize>().ok().map(|k| (s, k)))
@@ -213,7 +213,7 @@ fn camera(args: &RenderArgs) -> anyhow::Result<Camera> {
 
 /// The upstream gradient W, checked against the image shape.
 fn read_weights(path: &Path, cam: &Camera) -> anyhow::Result<Image2d<f64>> {
-    let arr = crate::volume::npy::read(path).context("--grad-weights")?;
+    let arr = unispine::volume::npy::read(path).context("--grad-weights")?;
     if arr.shape.len() != 2 || !arr.is_float() {
         bail!(
             "--grad-weights {}: expected a 2-D f32 or f64 npy array [v, u], got {} {:?}",
@@ -232,7 +232,7 @@ fn read_weights(path: &Path, cam: &Camera) -> anyhow::Result<Image2d<f64>> {
         );
     }
     let data: Vec<f64> = arr.to_f64_c();
-    crate::error::check_finite(&format!("--grad-weights {}", path.display()), &data)?;
+    unispine::error::check_finite(&format!("--grad-weights {}", path.display()), &data)?;
     Ok(Image2d::from_vec(w, h, data))
 }
 
@@ -249,7 +249,7 @@ fn render_and_write<R: Real>(
     let arr = Array2::from_shape_vec((img.height, img.width), img32.clone())?;
     let npy = args.out.join("image.npy");
     ndarray_npy::write_npy(&npy, &arr).with_context(|| format!("writing {}", npy.display()))?;
-    crate::preview::write_png(
+    unispine::preview::write_png(
         &args.out.join("image.png"),
         &Image2d::from_vec(img.width, img.height, img32),
     )?;

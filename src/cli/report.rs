@@ -23,20 +23,20 @@ pub struct ReportArgs {
 
 /// Print (and optionally write) the table.
 pub fn run(a: ReportArgs) -> anyhow::Result<()> {
-    let table = crate::report::table(&a.runs)?;
+    let table = unispine::report::table(&a.runs)?;
     print!("{table}");
     if let Some(p) = a.out {
-        crate::fsio::write_atomic(&p, table.as_bytes())?;
+        unispine::fsio::write_atomic(&p, table.as_bytes())?;
     }
     if let Some(dir) = a.charts {
         std::fs::create_dir_all(&dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
         for (name, svg) in [
-            ("tradeoff.svg", crate::report::tradeoff_chart(&a.runs)?),
-            ("curves.svg", crate::report::curves_chart(&a.runs)?),
+            ("tradeoff.svg", unispine::report::tradeoff_chart(&a.runs)?),
+            ("curves.svg", unispine::report::curves_chart(&a.runs)?),
         ] {
             let p = dir.join(name);
-            crate::fsio::write_atomic(&p, svg.as_bytes())?;
+            unispine::fsio::write_atomic(&p, svg.as_bytes())?;
             eprintln!("wrote {}", p.display());
         }
     }

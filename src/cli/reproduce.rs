@@ -7,9 +7,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 
-use crate::reproduce::aggregate;
-use crate::reproduce::plan::{Plan, TrainSchema, BUILTIN};
-use crate::reproduce::run::{self, Outcome, RunEvent, RunOptions};
+use unispine::reproduce::aggregate;
+use unispine::reproduce::plan::{Plan, TrainSchema, BUILTIN};
+use unispine::reproduce::run::{self, Outcome, RunEvent, RunOptions};
 
 /// Arguments of `unispine reproduce`.
 #[derive(Debug, clap::Args)]
@@ -34,7 +34,7 @@ pub struct ReproduceArgs {
     #[arg(long, value_name = "I", num_args = 0..=1, allow_negative_numbers = true)]
     pub task: Option<Option<String>>,
     /// Refuse plans with more cells than this (a guard against a mistyped plan).
-    #[arg(long, value_name = "N", default_value_t = crate::reproduce::plan::DEFAULT_MAX_CELLS)]
+    #[arg(long, value_name = "N", default_value_t = unispine::reproduce::plan::DEFAULT_MAX_CELLS)]
     pub max_cells: usize,
     /// Only build the tables from the cells that finished.
     #[arg(long)]
@@ -57,7 +57,7 @@ fn fmt_s(s: f64) -> String {
 /// Run `unispine reproduce`.
 pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
     if let Some(name) = &args.show {
-        let text = crate::reproduce::plan::builtin(name).with_context(|| {
+        let text = unispine::reproduce::plan::builtin(name).with_context(|| {
             format!(
                 "no built-in plan `{name}` (built-in: {})",
                 BUILTIN.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
@@ -72,7 +72,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
             BUILTIN.iter().map(|b| b.0).collect::<Vec<_>>().join(", ")
         );
     };
-    crate::par::check_workers("--jobs", args.jobs)?;
+    unispine::par::check_workers("--jobs", args.jobs)?;
     let schema = TrainSchema::of_train();
     let plan = Plan::load(plan_arg, &schema)?;
     plan.check_cells(args.max_cells)?;
@@ -139,14 +139,14 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
     };
     if args.emit_slurm {
         let abs = |p: &std::path::Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
-        let plan_ref = if crate::reproduce::plan::builtin(plan_arg).is_some() {
+        let plan_ref = if unispine::reproduce::plan::builtin(plan_arg).is_some() {
             plan_arg.clone()
         } else {
             abs(std::path::Path::new(plan_arg)).display().to_string()
         };
         // Paths that cannot be written into a script are refused before anything is built.
-        crate::reproduce::slurm::sh_path("--out", &abs(&out))?;
-        crate::reproduce::slurm::sh_path("PLAN", &abs(std::path::Path::new(plan_arg)))?;
+        unispine::reproduce::slurm::sh_path("--out", &abs(&out))?;
+        unispine::reproduce::slurm::sh_path("PLAN", &abs(std::path::Path::new(plan_arg)))?;
         std::fs::create_dir_all(&out).with_context(|| out.display().to_string())?;
         let mut on_event = |e: &RunEvent| {
             if let RunEvent::DatasetBuilding { name } = e {
@@ -158,7 +158,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
         for d in &plan.datasets {
             run::prepare_dataset(d, &opts, &mut on_event)?;
         }
-        let submit = crate::reproduce::slurm::write_scripts(
+        let submit = unispine::reproduce::slurm::write_scripts(
             &plan,
             &abs(&opts.bin),
             &plan_ref,
@@ -283,7 +283,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
                 .join(", ")
         );
     }
-    let charts = crate::report::reproduce::write_report(&rows, &out, &md, plan.floor_db)?;
+    let charts = unispine::report::reproduce::write_report(&rows, &out, &md, plan.floor_db)?;
     println!(
         "\nreport: {}\ntables: {}\nresults: {}, {}\ncharts: {}",
         out.join("report.html").display(),

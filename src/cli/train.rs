@@ -4,7 +4,7 @@
 //! Trains a method preset on a dataset folder (from `unispine data`), with a progress bar
 //! (iteration, loss, PSNR, number of Gaussians, iterations per second), a clean stop on
 //! SIGINT / SIGTERM that writes a checkpoint and exits 130 / 143 ([`super::signals`]), and the
-//! run folder described in [`crate::train::run_dir`].
+//! run folder described in [`unispine::train::run_dir`].
 
 use std::path::{Path, PathBuf};
 
@@ -12,9 +12,9 @@ use anyhow::{bail, Context};
 
 use super::progress::Progress;
 use super::signals;
-use crate::baseline::{Baseline, TrainMethod};
-use crate::error::Error;
-use crate::train::{self, Control, Event, Method, Metrics, RunDir, TrainOverrides};
+use unispine::baseline::{Baseline, TrainMethod};
+use unispine::error::Error;
+use unispine::train::{self, Control, Event, Method, Metrics, RunDir, TrainOverrides};
 
 /// Arguments of `unispine train`.
 #[derive(Debug, clap::Args)]
@@ -39,7 +39,7 @@ pub struct TrainArgs {
     #[arg(long, hide = true)]
     pub stop_after: Option<usize>,
     #[command(flatten)]
-    pub baseline: crate::baseline::BaselineFlags,
+    pub baseline: unispine::baseline::BaselineFlags,
     /// rayon threads (default: all cores). Results do not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
@@ -79,7 +79,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         TrainMethod::Gaussians(m) => m,
         TrainMethod::Baseline(b) => return run_baseline(b, &args),
     };
-    crate::baseline::check_vm_lines(method.name(), args.baseline.vm_lines)?;
+    unispine::baseline::check_vm_lines(method.name(), args.baseline.vm_lines)?;
     init_threads(args.threads)?;
     if args.resume.is_some() && method != Method::Unispine {
         bail!("--method cannot be combined with --resume (the run's config.json is used)");
@@ -94,7 +94,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                 (None, Some(d)) => d,
                 (None, None) => bail!("the run's config.json names no dataset: pass --data"),
             };
-            let ds = crate::dataset::store::load(&data)?;
+            let ds = unispine::dataset::store::load(&data)?;
             (cfg, ds, run.clone())
         }
         None => {
@@ -107,7 +107,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                 .canonicalize()
                 .with_context(|| format!("--data {}", data.display()))?;
             cfg.data = Some(abs.display().to_string());
-            let ds = crate::dataset::store::load(data)?;
+            let ds = unispine::dataset::store::load(data)?;
             (cfg, ds, out.clone())
         }
     };
@@ -286,15 +286,15 @@ fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
         .overrides
         .given()
         .into_iter()
-        .find(|f| !crate::baseline::FLAGS.contains(&&f[2..]))
+        .find(|f| !unispine::baseline::FLAGS.contains(&&f[2..]))
     {
         bail!(
             "invalid `{flag}`: a setting of the Gaussian trainer; `{}` takes only --{}",
             b.name(),
-            crate::baseline::FLAGS.join(", --")
+            unispine::baseline::FLAGS.join(", --")
         );
     }
-    let opts = crate::baseline::BaselineOptions {
+    let opts = unispine::baseline::BaselineOptions {
         iters: args.iters,
         seed: args.overrides.seed,
         vm_lines: args.baseline.vm_lines,
@@ -309,7 +309,7 @@ fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
         out,
         field,
         args.threads,
-        |ds, on_event| crate::baseline::run(b, ds, Some(out), opts, &signals::STOP, on_event),
+        |ds, on_event| unispine::baseline::run(b, ds, Some(out), opts, &signals::STOP, on_event),
     )
 }
 
@@ -347,7 +347,9 @@ fn resume_field(run: &Path, args: &TrainArgs) -> anyhow::Result<()> {
         run,
         true,
         args.threads,
-        |ds, on_event| crate::baseline::resume(run, ds, &signals::STOP, args.stop_after, on_event),
+        |ds, on_event| {
+            unispine::baseline::resume(run, ds, &signals::STOP, args.stop_after, on_event)
+        },
     )
 }
 
@@ -359,9 +361,12 @@ fn drive_baseline(
     out: &Path,
     field: bool,
     threads: Option<usize>,
-    go: impl FnOnce(&crate::dataset::Dataset, &mut dyn FnMut(&Event)) -> crate::error::Result<Metrics>,
+    go: impl FnOnce(
+        &unispine::dataset::Dataset,
+        &mut dyn FnMut(&Event),
+    ) -> unispine::error::Result<Metrics>,
 ) -> anyhow::Result<()> {
-    let ds = crate::dataset::store::load(data)?;
+    let ds = unispine::dataset::store::load(data)?;
     init_threads(threads)?;
     if field {
         signals::install()?;
