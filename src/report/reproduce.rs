@@ -574,7 +574,7 @@ mod tests {
                     let tag = &doc[i + 1..end];
                     assert!(!tag.contains('<'), "`<` inside a tag: {tag}");
                     let quotes = tag.matches('"').count();
-                    assert!(quotes % 2 == 0, "unbalanced quotes in {tag}");
+                    assert!(quotes.is_multiple_of(2), "unbalanced quotes in {tag}");
                     if !(tag.starts_with('!') || tag.starts_with('?')) {
                         let name: String = tag
                             .trim_start_matches('/')
