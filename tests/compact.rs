@@ -23,6 +23,7 @@ fn settings() -> RenderSettings {
         color: ColorMode::RirfXgaussian,
         active_features: 1,
         background: 0.0,
+        ..Default::default()
     }
 }
 

@@ -310,6 +310,7 @@ fn ndc_mean_gradient_has_the_3dgs_scale_and_axis_order() {
         color: ColorMode::RirfXgaussian,
         active_features: 1,
         background: 0.0,
+        ..Default::default()
     };
     let (img, saved) = render::forward(&g, &cam, &settings).unwrap();
     // Weights linear in (u, v) with different slopes, zero where the splat is faint (so no

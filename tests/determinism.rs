@@ -17,6 +17,7 @@ fn run<R: Real>(threads: usize, color: ColorMode) -> Vec<u64> {
         color,
         active_features: 16,
         background: 0.1,
+        ..Default::default()
     };
     let d = Image2d::from_vec(
         size,

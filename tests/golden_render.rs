@@ -177,6 +177,7 @@ fn run(inputs: &Value) -> Run {
         color,
         active_features: inputs["active_features"].as_u64().unwrap() as usize,
         background: inputs["background"].as_f64().unwrap(),
+        ..Default::default()
     };
     let mut g = Gaussians::<f64>::zeros(0);
     g.means = rows::<3>(inputs, "means");

@@ -212,6 +212,7 @@ pub fn settings(
         color,
         active_features,
         background,
+        ..Default::default()
     })
 }
 
@@ -233,6 +234,29 @@ pub fn geometry(obj: &Bound<'_, PyAny>) -> PyResult<ConeBeam> {
     geo.validate()
         .map_err(|e| PyValueError::new_err(format!("`geometry`: {e}")))?;
     Ok(geo)
+}
+
+/// Rasterizer conventions from a dict of `unispine::render::Conventions` fields (`None`: the
+/// default), validated; an unknown field or value is a `ValueError` naming it.
+pub fn conventions(obj: Option<&Bound<'_, PyAny>>) -> PyResult<unispine::render::Conventions> {
+    let Some(obj) = obj.filter(|o| !o.is_none()) else {
+        return Ok(Default::default());
+    };
+    if obj.cast::<PyDict>().is_err() {
+        return Err(PyTypeError::new_err(
+            "`conventions` must be a dict (alpha_max, t_stop, radius_sigmas, radius_rule, eps2d, pixel_center, clamp_gradient, near_plane, jacobian_limits)",
+        ));
+    }
+    let text: String = obj
+        .py()
+        .import("json")?
+        .call_method1("dumps", (obj,))
+        .map_err(|e| PyValueError::new_err(format!("`conventions` is not JSON-serialisable: {e}")))?
+        .extract()?;
+    let c: unispine::render::Conventions = serde_json::from_str(&text)
+        .map_err(|e| PyValueError::new_err(format!("`conventions`: {e}")))?;
+    c.validate().map_err(lib_err)?;
+    Ok(c)
 }
 
 /// Angles in radians: a float or a 1-D sequence / array of floats, all finite.

@@ -84,7 +84,11 @@ fn gaussians_and_cameras<'py, R: Float>(
 ///
 /// Compositing (3DGS's rules): alpha = min(0.99, o exp(power)), skipped when power > 0 or
 /// alpha < 1/255; a pixel stops, without blending, when T (1 - alpha) < 1e-4; image =
-/// sum_i c_i alpha_i T_i + T_final * ``background``.
+/// sum_i c_i alpha_i T_i + T_final * ``background``. ``conventions`` (a dict, default None)
+/// switches these rules to another rasterizer's (``alpha_max``, ``t_stop``, ``radius_sigmas``,
+/// ``radius_rule``, ``eps2d``, ``pixel_center``, ``clamp_gradient``, ``near_plane``,
+/// ``jacobian_limits``; see ``unispine.conformance.CONVENTIONS``); any non-default value
+/// renders through the scalar reference path (per pixel, slower than the tile kernels).
 ///
 /// Returns ``(image, transmittance, n_contrib)``, each [C, H, W] (row 0 at the top):
 /// the image (dtype of ``means``), the final transmittance T_final per pixel, and (uint32)
@@ -94,7 +98,7 @@ fn gaussians_and_cameras<'py, R: Float>(
 #[pyfunction]
 #[pyo3(signature = (means, quats, log_scales, opacity_logits, features, viewmats=None, Ks=None,
     width=None, height=None, *, camera_model="pinhole", geometry=None, angles=None,
-    color_mode="rirf-paper", active_features=16, background=0.0))]
+    color_mode="rirf-paper", active_features=16, background=0.0, conventions=None))]
 #[allow(non_snake_case, clippy::too_many_arguments)]
 fn rasterize<'py>(
     py: Python<'py>,
@@ -113,8 +117,10 @@ fn rasterize<'py>(
     color_mode: &str,
     active_features: usize,
     background: f64,
+    conventions: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<(Py<PyAny>, Py<PyAny>, Py<PyAny>)> {
-    let s = args::settings(color_mode, active_features, background)?;
+    let mut s = args::settings(color_mode, active_features, background)?;
+    s.conventions = args::conventions(conventions)?;
     with_dtype!(args::dtype_of("means", means)?, R, {
         let (g, cams) = gaussians_and_cameras::<R>(
             means,
@@ -185,7 +191,7 @@ fn rasterize<'py>(
 #[pyfunction]
 #[pyo3(signature = (means, quats, log_scales, opacity_logits, features, viewmats=None, Ks=None,
     width=None, height=None, *, d_image, camera_model="pinhole", geometry=None, angles=None,
-    color_mode="rirf-paper", active_features=16, background=0.0))]
+    color_mode="rirf-paper", active_features=16, background=0.0, conventions=None))]
 #[allow(non_snake_case, clippy::too_many_arguments)]
 fn rasterize_vjp<'py>(
     py: Python<'py>,
@@ -205,8 +211,10 @@ fn rasterize_vjp<'py>(
     color_mode: &str,
     active_features: usize,
     background: f64,
+    conventions: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
-    let s = args::settings(color_mode, active_features, background)?;
+    let mut s = args::settings(color_mode, active_features, background)?;
+    s.conventions = args::conventions(conventions)?;
     with_dtype!(args::dtype_of("means", means)?, R, {
         let (g, cams) = gaussians_and_cameras::<R>(
             means,

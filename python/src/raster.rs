@@ -9,7 +9,7 @@ use pyo3::types::PyDict;
 use unispine::gaussians::Gaussians;
 use unispine::geometry::Camera;
 use unispine::image2d::Image2d;
-use unispine::render::{self, composite, project, RenderSettings};
+use unispine::render::{self, project, RenderSettings};
 
 use crate::args::{self, Float};
 
@@ -104,7 +104,7 @@ pub fn vjp<R: Float>(
         let d = Image2d::from_vec(cam.width, cam.height, d_image[off..off + px].to_vec());
         off += px;
         // The two stages of `render::backward`, kept apart to expose the splat gradients.
-        let ds = composite::backward(&saved.splats, &saved.composite, &d);
+        let ds = render::composite_backward(&saved, &d);
         let dp = project::backward(g, cam, s, &saved.splats, &saved.project, &ds);
         if cams.len() == 1 {
             v.params = dp;

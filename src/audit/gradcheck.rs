@@ -48,6 +48,7 @@ impl Scene {
             color,
             active_features: N_FEATURES,
             background: self.background,
+            ..Default::default()
         }
     }
     /// The fixed upstream gradient W (uniform in [-1, 1], seeded by the scene).

@@ -158,6 +158,7 @@ fn settings(
             .background
             .or(recorded.map(|r| r.background))
             .unwrap_or(def.background),
+        ..Default::default()
     };
     if !unispine::gaussians::rirf::valid_active(s.active_features) {
         bail!(

@@ -15,9 +15,13 @@
 //! [`backward`]: crate::render::backward
 
 pub mod composite;
+pub mod conventions;
 pub mod lanes;
 pub mod project;
+pub mod reference;
 pub mod tiles;
+
+pub use conventions::Conventions;
 
 use serde::{Deserialize, Serialize};
 
@@ -35,6 +39,10 @@ pub struct RenderSettings {
     pub active_features: usize,
     /// Background value added with the final transmittance (black = 0).
     pub background: f64,
+    /// Rasterizer conventions (alpha clamp, radius, stop test, ...). The default keeps every
+    /// output's bits and the fast kernels; another value renders through [`reference`].
+    #[serde(default, skip_serializing_if = "Conventions::is_default")]
+    pub conventions: Conventions,
 }
 
 impl Default for RenderSettings {
@@ -43,6 +51,7 @@ impl Default for RenderSettings {
             color: ColorMode::RirfPaper,
             active_features: 16,
             background: 0.0,
+            conventions: Conventions::default(),
         }
     }
 }
@@ -98,7 +107,7 @@ impl RenderSettings {
                 format!("must be finite, got {}", self.background),
             ));
         }
-        Ok(())
+        self.conventions.validate()
     }
 }
 
@@ -135,6 +144,8 @@ pub struct RenderSaved<R: Real> {
     pub splats: Splats<R>,
     pub project: project::ProjectSaved<R>,
     pub composite: composite::CompositeSaved<R>,
+    /// The per-pixel blend lists of the reference path (non-default conventions), else `None`.
+    pub reference: Option<Box<reference::ReferenceSaved<R>>>,
 }
 
 /// Gradients of a scalar loss from [`backward`].
@@ -150,12 +161,16 @@ pub struct RenderGrads<R: Real> {
     pub radius: Vec<u32>,
 }
 
-/// Render `g` from `cam`: projection then compositing.
+/// Render `g` from `cam`: projection then compositing. Non-default conventions render through
+/// the scalar [`reference`] path (validated first).
 pub fn forward<R: Real>(
     g: &crate::gaussians::Gaussians<R>,
     cam: &crate::geometry::Camera,
     settings: &RenderSettings,
 ) -> crate::error::Result<(crate::image2d::Image2d<R>, RenderSaved<R>)> {
+    if !settings.conventions.is_default() {
+        return reference::forward(g, cam, settings);
+    }
     let (splats, ps) = project::forward(g, cam, settings)?;
     let (img, cs) = composite::forward(&splats, cam.width, cam.height, R::c(settings.background));
     Ok((
@@ -164,8 +179,21 @@ pub fn forward<R: Real>(
             splats,
             project: ps,
             composite: cs,
+            reference: None,
         },
     ))
+}
+
+/// The compositing stage's VJP of a [`forward`]: the tile kernels, or the reference path's
+/// per-pixel lists when the forward took it.
+pub fn composite_backward<R: Real>(
+    saved: &RenderSaved<R>,
+    d_image: &crate::image2d::Image2d<R>,
+) -> SplatGrads<R> {
+    match &saved.reference {
+        Some(r) => reference::composite_backward(&saved.splats, r, d_image),
+        None => composite::backward(&saved.splats, &saved.composite, d_image),
+    }
 }
 
 /// Gradients of sum(d_image * image) with respect to every parameter of `g`.
@@ -176,7 +204,7 @@ pub fn backward<R: Real>(
     saved: &RenderSaved<R>,
     d_image: &crate::image2d::Image2d<R>,
 ) -> RenderGrads<R> {
-    let ds = composite::backward(&saved.splats, &saved.composite, d_image);
+    let ds = composite_backward(saved, d_image);
     let params = project::backward(g, cam, settings, &saved.splats, &saved.project, &ds);
     let (w, h) = (R::c(cam.width as f64), R::c(cam.height as f64));
     let half = R::c(0.5);

@@ -97,7 +97,16 @@ pub struct CamConsts<R: Real> {
     pub cy: R,
     /// Jacobian clamp limits 1.3 tan(fov/2) on x/z and y/z (cone beam only).
     pub lim_x: R,
+    /// Lower limit of x/z inside J, negated (= `lim_x` unless the conventions say
+    /// `principal-point`).
+    pub lim_x_neg: R,
     pub lim_y: R,
+    /// Lower limit of y/z inside J, negated.
+    pub lim_y_neg: R,
+    /// Near plane: drawn only when t_z > `near`.
+    pub near: R,
+    /// Sigma2D dilation (eps2d).
+    pub dilation: R,
     pub width: f64,
     pub height: f64,
     pub parallel: bool,
@@ -106,6 +115,12 @@ pub struct CamConsts<R: Real> {
 impl<R: Real> CamConsts<R> {
     /// Constants of `cam`.
     pub fn new(cam: &Camera) -> Self {
+        Self::with_conventions(cam, &super::Conventions::default())
+    }
+
+    /// The constants of `cam` under the projection conventions of `conv` (near plane, eps2d,
+    /// Jacobian limits); the defaults give [`CamConsts::new`].
+    pub fn with_conventions(cam: &Camera, conv: &super::Conventions) -> Self {
         let parallel = cam.mode == Mode::Parallel;
         let (fx, fy) = if parallel {
             (1.0 / cam.pitch[1], 1.0 / cam.pitch[0])
@@ -114,6 +129,18 @@ impl<R: Real> CamConsts<R> {
         };
         let tan_x = cam.width as f64 / (2.0 * cam.fx);
         let tan_y = cam.height as f64 / (2.0 * cam.fy);
+        let (lim_x, lim_x_neg, lim_y, lim_y_neg) = match conv.jacobian_limits {
+            super::conventions::JacobianLimits::Symmetric => {
+                (CLAMP * tan_x, CLAMP * tan_x, CLAMP * tan_y, CLAMP * tan_y)
+            }
+            // gsplat `_persp_proj`: (W - cx)/fx + 0.3 tan and cx/fx + 0.3 tan.
+            super::conventions::JacobianLimits::PrincipalPoint => (
+                (cam.width as f64 - cam.cx) / cam.fx + (CLAMP - 1.0) * tan_x,
+                cam.cx / cam.fx + (CLAMP - 1.0) * tan_x,
+                (cam.height as f64 - cam.cy) / cam.fy + (CLAMP - 1.0) * tan_y,
+                cam.cy / cam.fy + (CLAMP - 1.0) * tan_y,
+            ),
+        };
         CamConsts {
             rot: mat3_cast(&cam.rot),
             centre: cam.centre.map(R::c),
@@ -121,8 +148,12 @@ impl<R: Real> CamConsts<R> {
             fy: R::c(fy),
             cx: R::c(cam.cx),
             cy: R::c(cam.cy),
-            lim_x: R::c(CLAMP * tan_x),
-            lim_y: R::c(CLAMP * tan_y),
+            lim_x: R::c(lim_x),
+            lim_x_neg: R::c(lim_x_neg),
+            lim_y: R::c(lim_y),
+            lim_y_neg: R::c(lim_y_neg),
+            near: R::c(conv.near_plane),
+            dilation: R::c(conv.eps2d),
             width: cam.width as f64,
             height: cam.height as f64,
             parallel,
@@ -203,7 +234,7 @@ pub(crate) fn geom_core<R: Real, const SCREEN: bool, const PARALLEL: bool>(
     let (quat_ok, norm, qn) = normalize_unchecked(quat);
     let (sigma, cov) = covariance_scaled(norm, qn, scale);
     // Positive phrasing so that NaN fails.
-    let near_ok = t[2] > R::c(NEAR);
+    let near_ok = t[2] > cam.near;
     let zero = R::zero();
     let (j, clamped, mean2d) = if PARALLEL {
         (
@@ -215,8 +246,8 @@ pub(crate) fn geom_core<R: Real, const SCREEN: bool, const PARALLEL: bool>(
         let z = t[2];
         let iz = R::one() / z;
         let (rx, ry) = (t[0] * iz, t[1] * iz);
-        let cxr = rx.max(-cam.lim_x).min(cam.lim_x);
-        let cyr = ry.max(-cam.lim_y).min(cam.lim_y);
+        let cxr = rx.max(-cam.lim_x_neg).min(cam.lim_x);
+        let cyr = ry.max(-cam.lim_y_neg).min(cam.lim_y);
         let clamped = [cxr != rx, cyr != ry];
         // x~/z^2 = clamp(x/z)/z.
         (
@@ -238,7 +269,7 @@ pub(crate) fn geom_core<R: Real, const SCREEN: bool, const PARALLEL: bool>(
     // Sigma2D = T Sigma T^T + 0.3 I.
     let s0 = mat3_vec(&sigma, tm[0]);
     let s1 = mat3_vec(&sigma, tm[1]);
-    let dil = R::c(DILATION);
+    let dil = cam.dilation;
     let a = tm[0][0] * s0[0] + tm[0][1] * s0[1] + tm[0][2] * s0[2] + dil;
     let b = tm[0][0] * s1[0] + tm[0][1] * s1[1] + tm[0][2] * s1[2];
     let c = tm[1][0] * s1[0] + tm[1][1] * s1[1] + tm[1][2] * s1[2] + dil;
@@ -413,7 +444,7 @@ pub(crate) fn forward_with<R: Real>(
 ) -> Result<(Splats<R>, ProjectSaved<R>)> {
     check_inputs(g, settings)?;
     let n = g.len();
-    let cc = CamConsts::<R>::new(cam);
+    let cc = CamConsts::<R>::with_conventions(cam, &settings.conventions);
     let z = R::zero();
     let mut s = Splats {
         mean2d: vec![[z; 2]; n],
@@ -535,7 +566,7 @@ pub(crate) fn backward_geom<R: Real, const PARALLEL: bool>(
         // J02 = -fx x~/z^2 with x~ = x (free) or lim z (clamped). Clamped: J02 = -fx lim/z,
         // dJ02/dz = fx lim/z^2 = fx x~/z^3, dJ02/dx = 0. Both cases are computed and one is
         // kept, so the loops over Gaussians stay branch-free.
-        let xc = x.max(-cc.lim_x * z).min(cc.lim_x * z);
+        let xc = x.max(-cc.lim_x_neg * z).min(cc.lim_x * z);
         let (dt0, dt2) = (dt[0] - cc.fx * iz2 * dj[0][2], dt[2]);
         dt[2] = if geo.clamped[0] {
             dt2 + cc.fx * xc * iz3 * dj[0][2]
@@ -543,7 +574,7 @@ pub(crate) fn backward_geom<R: Real, const PARALLEL: bool>(
             dt2 + two * cc.fx * x * iz3 * dj[0][2]
         };
         dt[0] = if geo.clamped[0] { dt[0] } else { dt0 };
-        let yc = y.max(-cc.lim_y * z).min(cc.lim_y * z);
+        let yc = y.max(-cc.lim_y_neg * z).min(cc.lim_y * z);
         let (dt1, dt2) = (dt[1] - cc.fy * iz2 * dj[1][2], dt[2]);
         dt[2] = if geo.clamped[1] {
             dt2 + cc.fy * yc * iz3 * dj[1][2]
@@ -584,7 +615,7 @@ pub(crate) fn backward_with<R: Real>(
 ) -> Gaussians<R> {
     let n = g.len();
     let mut out = Gaussians::<R>::zeros(n);
-    let cc = CamConsts::<R>::new(cam);
+    let cc = CamConsts::<R>::with_conventions(cam, &settings.conventions);
     out.means
         .par_chunks_mut(CHUNK)
         .zip(out.log_scales.par_chunks_mut(CHUNK))

@@ -199,6 +199,7 @@ impl<'a> Trainer<'a> {
             color: self.cfg.color,
             active_features: self.cfg.active_features(it),
             background: self.cfg.background,
+            ..Default::default()
         }
     }
 

@@ -38,6 +38,7 @@ pub fn dataset() -> Dataset {
         color: ColorMode::RirfXgaussian,
         active_features: 1,
         background: 0.0,
+        ..Default::default()
     };
     let split = |angles: Vec<f64>| Split {
         projections: angles

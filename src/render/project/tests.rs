@@ -23,6 +23,7 @@ fn settings(color: ColorMode, active: usize) -> RenderSettings {
         color,
         active_features: active,
         background: 0.0,
+        ..Default::default()
     }
 }
 
