@@ -4,7 +4,7 @@
 //! The default is this crate's convention (3DGS `graphdeco-inria/diff-gaussian-rasterization`,
 //! `cuda_rasterizer/{forward,backward,auxiliary}.cu/h`, with gsplat's pixel centres and tile
 //! rule); with it every output keeps its bits and the SIMD tile kernels run. Any other value
-//! routes the render through the scalar per-pixel reference path ([`super::reference`]), which
+//! routes the render through the scalar per-pixel reference path ([`mod@super::reference`]), which
 //! implements every setting below (per pixel, over its tile's splats; for audits, not training).
 //!
 //! | setting | default (3DGS) | gsplat v1.5.3 (`gsplat/cuda/_torch_impl.py`, `csrc/`) |

@@ -40,7 +40,7 @@ pub struct RenderSettings {
     /// Background value added with the final transmittance (black = 0).
     pub background: f64,
     /// Rasterizer conventions (alpha clamp, radius, stop test, ...). The default keeps every
-    /// output's bits and the fast kernels; another value renders through [`reference`].
+    /// output's bits and the fast kernels; another value renders through [`mod@reference`].
     #[serde(default, skip_serializing_if = "Conventions::is_default")]
     pub conventions: Conventions,
 }
@@ -162,7 +162,7 @@ pub struct RenderGrads<R: Real> {
 }
 
 /// Render `g` from `cam`: projection then compositing. Non-default conventions render through
-/// the scalar [`reference`] path (validated first).
+/// the scalar [`mod@reference`] path (validated first).
 pub fn forward<R: Real>(
     g: &crate::gaussians::Gaussians<R>,
     cam: &crate::geometry::Camera,
