@@ -253,3 +253,31 @@ def test_unknown_case_and_convention_are_errors():
         unispine.rasterize(*params(scene(3, 1)), vm, k, w, h, conventions={"alpha_max": 1.5})
     with pytest.raises(ValueError, match="unknown field"):
         unispine.rasterize(*params(scene(3, 1)), vm, k, w, h, conventions={"alpha": 0.9})
+
+
+def test_a_numpy_backend_with_a_vjp_is_checked_through_the_adapter(gsplat, torch):
+    """The numpy contract: arrays in, an image array out, gradients from a `vjp` callable (here
+    gsplat's reference behind numpy, its vjp by autograd); the kit chains them to the
+    pre-activation groups."""
+    names = ["means", "quats", "scales", "opacities", "colors", "viewmats", "Ks"]
+
+    def call(arrays, w, h, kw):
+        ts = [torch.tensor(a, requires_grad=i < 5) for i, a in enumerate(arrays)]
+        kwt = dict(kw, backgrounds=torch.tensor(kw["backgrounds"]))
+        return ts, gsplat_cpu.rasterization(*ts, w, h, **kwt)[0]
+
+    def fn(*a, **kw):
+        return call(a[:7], a[7], a[8], kw)[1].detach().numpy()
+
+    def vjp(d_image, *a, **kw):
+        ts, img = call(a[:7], a[7], a[8], kw)
+        (img * torch.tensor(d_image)).sum().backward()
+        return {n: t.grad.numpy() for n, t in zip(names[:5], ts)}
+    b = conformance.Backend(fn, "gsplat via numpy", "gsplat-1.5.3", array="numpy", vjp=vjp)
+    res = conformance.run(b, "float64", cases=["random-sparse", "sh-degree-1", "rirf-xgaussian"])
+    show(res)
+    assert res.passed, res.markdown()
+    assert all(c["gradients"] for c in res.cases)
+    no_vjp = conformance.run(conformance.Backend(fn, "forward only", "gsplat-1.5.3",
+                                                 array="numpy"), cases=["random-sparse"])
+    assert no_vjp.passed and set(no_vjp.cases[0]["groups"]) == {"image"}
