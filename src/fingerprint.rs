@@ -1,9 +1,10 @@
 //! Fingerprints: 64-bit FNV-1a hashes that say whether two things are the same (a dataset, a
 //! config, a file's payload). Identity checks between runs, not a security measure.
 //!
-//! - [`fnv1a`]: FNV-1a 64 over bytes (cell keys, dataset folder checksums).
-//! - [`Words`]: the same recurrence over 64-bit little-endian words, then the bytes of the tail:
-//!   eight times fewer multiplications, for the checkpoints' payload checksum and the datasets'
+//! - [`fnv1a`](crate::fingerprint::fnv1a): FNV-1a 64 over bytes (cell keys, dataset folder
+//!   checksums).
+//! - [`Words`](crate::fingerprint::Words): the same recurrence over 64-bit little-endian words,
+//!   then the bytes of the tail: eight times fewer multiplications, for the checkpoints' payload checksum and the datasets'
 //!   in-memory fingerprint (hundreds of MB at 1024^2). Each step `h = (h ^ w) * p` is a
 //!   bijection of `h` for a fixed word, so a change in any one word always changes the result.
 
