@@ -81,6 +81,16 @@ fn a_plan_runs_resumes_and_does_not_depend_on_jobs() {
     let md = std::fs::read_to_string(dir.join("a/tables.md")).unwrap();
     assert!(md.contains("| xgaussian | 2 of 2 |"), "{md}");
     assert!(md.contains("SPWM improves on X-Gaussian"), "{md}");
+    // Magnitude, pooled and per dataset: `ph` stands in for no paper dataset, so the sign alone.
+    assert!(md.contains("## Verdicts on magnitude"), "{md}");
+    assert!(
+        md.contains("| pooled | 2 |") && md.contains("| ph | 2 |"),
+        "{md}"
+    );
+    assert!(
+        t.contains("magnitude: [ph] SPWM improves on X-Gaussian"),
+        "{t}"
+    );
 
     // Run again: every cell is kept, nothing retrains.
     let ply = dir.join("a/runs/ph/unispine/seed1/model.ply");

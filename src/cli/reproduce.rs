@@ -270,6 +270,14 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
     for v in &verdicts {
         println!("verdict: {:<15} {}", v.word.as_str(), v.claim.text);
     }
+    for m in unispine::reproduce::magnitude::scoped(&plan, &rows) {
+        println!(
+            "magnitude: [{}] {}: {}",
+            m.scope,
+            m.verdict.claim.text,
+            m.reading()
+        );
+    }
     let missing = aggregate::missing(&rows);
     if !missing.is_empty() {
         println!(

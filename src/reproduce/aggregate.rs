@@ -253,6 +253,7 @@ pub fn to_json(plan: &Plan, rows: &[Row], verdicts: &[Verdict]) -> String {
         "seeds": plan.seeds,
         "rows": rows,
         "verdicts": verdicts,
+        "magnitude": super::magnitude::scoped(plan, rows),
     });
     serde_json::to_string_pretty(&v).expect("serialisable")
 }
@@ -520,6 +521,7 @@ pub fn tables_md(
             ""
         }
     );
+    s.push_str(&super::magnitude::section(plan, rows));
     // Cells that did not complete.
     let bad: Vec<&Row> = rows.iter().filter(|r| r.psnr.is_none()).collect();
     if !bad.is_empty() {

@@ -5,17 +5,20 @@
 //! their `unispine train` arguments) -> [`run`] (cells as
 //! `unispine train` child processes into `OUT/runs/DATASET/METHOD/seedK/`, resumable) ->
 //! [`aggregate`] (results.csv / results.json, mean +- sd per row) -> [`verdict`] (the paper's
-//! claims as paired differences with 95 % intervals) -> `tables.md`.
+//! claims as paired differences with 95 % intervals) -> [`magnitude`] (the paper's effect
+//! against those intervals, per dataset and pooled) -> `tables.md`.
 //!
 //! [`plan`]: crate::reproduce::plan
 //! [`cell`]: crate::reproduce::cell
 //! [`run`]: crate::reproduce::run
 //! [`aggregate`]: crate::reproduce::aggregate
 //! [`verdict`]: crate::reproduce::verdict
+//! [`magnitude`]: crate::reproduce::magnitude
 
 pub mod aggregate;
 pub mod cell;
 pub mod compactness;
+pub mod magnitude;
 pub mod plan;
 pub mod provenance;
 pub mod run;
