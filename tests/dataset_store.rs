@@ -59,6 +59,7 @@ fn dataset(n_train: usize, n_test: usize) -> Dataset {
             projector: "siddon".into(),
             noise: "none".into(),
             extra,
+            pose_noise: None,
         },
         volume: Some(vol),
     }

@@ -296,6 +296,15 @@ pub(crate) fn baseline_metrics(
 /// FDK from the training views, re-projected with our DRR and scored at the test views.
 pub fn run_fdk(ds: &Dataset) -> Result<(Outcome, Volume<f32>)> {
     crate::dataset::store::check(ds)?;
+    if ds.manifest.pose_noise.is_some() {
+        // FDK filters and back-projects along the circular orbit; perturbed recorded cameras
+        // leave it, so running it on the nominal angles would ignore the condition.
+        return Err(Error::invalid(
+            "manifest.pose_noise",
+            "FDK needs the circular orbit: this dataset's recorded training cameras carry pose \
+             noise (make it with --pose-noise-deg 0 --pose-noise-mm 0 for FDK)",
+        ));
+    }
     let t0 = Instant::now();
     let vol = crate::fdk::reconstruct(&ds.geometry, &ds.train.angles, &ds.train.projections)?;
     let train_time = t0.elapsed().as_secs_f64();

@@ -102,6 +102,31 @@ pub struct DatasetFlags {
     /// Projector.
     #[arg(long, value_enum, default_value = "siddon")]
     pub projector: ProjectorArg,
+    /// Pose error: the recorded training cameras are rotated about a uniformly random axis
+    /// through the isocentre by N(0, S^2) degrees (the projections use the exact cameras; test
+    /// cameras stay exact). 0 with `--pose-noise-mm 0` = the exact cameras, today's dataset.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub pose_noise_deg: f64,
+    /// Pose error: the recorded training sources and detectors are translated by N(0, T^2) mm
+    /// per axis.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub pose_noise_mm: f64,
+    /// Seed of the pose error (default: `--seed`).
+    #[arg(long)]
+    pub pose_seed: Option<u64>,
+}
+
+/// The pose error of `f`'s training views (None: exact cameras); errors name the flag.
+fn pose_noise(
+    f: &DatasetFlags,
+    views: usize,
+) -> anyhow::Result<Option<unispine::dataset::pose::PoseNoise>> {
+    Ok(unispine::dataset::pose::draw(
+        f.pose_noise_deg,
+        f.pose_noise_mm,
+        f.pose_seed.unwrap_or(f.seed),
+        views,
+    )?)
 }
 
 /// `data phantom` and `data us-proxy`.
@@ -213,6 +238,7 @@ fn options(f: &DatasetFlags, units: &str, normalisation: &str) -> anyhow::Result
         volume_normalisation: normalisation.into(),
     };
     o.validate().map_err(flag_error)?;
+    pose_noise(f, 0)?;
     Ok(o)
 }
 
@@ -237,7 +263,8 @@ fn flag_error(e: unispine::error::Error) -> anyhow::Error {
 }
 
 /// Project `vol` and write the dataset, with a progress bar.
-fn make(vol: &Volume<f32>, opts: &GenerateOptions, out: &Path) -> anyhow::Result<()> {
+fn make(vol: &Volume<f32>, opts: &GenerateOptions, flags: &DatasetFlags) -> anyhow::Result<()> {
+    let out = flags.out.as_path();
     let total = (opts.train_views + opts.test_views) as u64;
     let bar = Mutex::new(Progress::new("projecting", total));
     let ds = generate::generate(vol, opts, &|done, _total| {
@@ -248,6 +275,17 @@ fn make(vol: &Volume<f32>, opts: &GenerateOptions, out: &Path) -> anyhow::Result
     bar.into_inner()
         .map(|b| b.finish(&format!("{total} views")))
         .ok();
+    let mut ds = ds;
+    if let Some(p) = pose_noise(flags, ds.train.angles.len())? {
+        unispine::dataset::pose::check(&p, &ds.geometry, &ds.train.angles).map_err(|e| {
+            anyhow::anyhow!(
+                "invalid --pose-noise-deg {} / --pose-noise-mm {}: {e}",
+                flags.pose_noise_deg,
+                flags.pose_noise_mm
+            )
+        })?;
+        ds.manifest.pose_noise = Some(p);
+    }
     save(&ds, out)
 }
 
@@ -337,7 +375,7 @@ fn run_phantom(a: PhantomArgs, proxy: bool) -> anyhow::Result<()> {
         )?;
         (mu, o)
     };
-    make(&vol, &opts, &a.data.out)
+    make(&vol, &opts, &a.data)
 }
 
 /// Parse `25-50` or `25,26,30` into label ids.
@@ -413,7 +451,7 @@ fn run_ct(a: CtArgs) -> anyhow::Result<()> {
         vol.provenance.steps.join("; ")
     );
     let opts = options(&a.data, units, &norm)?;
-    make(&vol, &opts, &a.data.out)
+    make(&vol, &opts, &a.data)
 }
 
 fn run_us(a: UsArgs) -> anyhow::Result<()> {
@@ -433,7 +471,7 @@ fn run_us(a: UsArgs) -> anyhow::Result<()> {
         "ultrasound scalar field, min-max normalised to [0, 1] (the paper projects ultrasound \
          volumes with the same operator as CT)",
     )?;
-    make(&vol, &opts, &a.data.out)
+    make(&vol, &opts, &a.data)
 }
 
 fn run_import(a: ImportArgs) -> anyhow::Result<()> {

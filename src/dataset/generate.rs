@@ -310,6 +310,7 @@ pub fn generate(
         },
         noise: opts.noise.describe(),
         extra,
+        pose_noise: None,
     };
     let ds = Dataset {
         geometry,

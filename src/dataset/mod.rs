@@ -8,6 +8,7 @@
 pub mod generate;
 pub mod noise;
 pub mod pickle;
+pub mod pose;
 pub mod store;
 pub mod targets;
 
@@ -40,6 +41,9 @@ pub struct Manifest {
     /// Free-form extra fields (generator settings).
     #[serde(default)]
     pub extra: serde_json::Map<String, serde_json::Value>,
+    /// Pose error of the recorded training cameras ([`pose`]); absent = exact cameras.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose_noise: Option<pose::PoseNoise>,
 }
 
 /// A projection dataset.
@@ -55,9 +59,19 @@ pub struct Dataset {
 }
 
 impl Dataset {
-    /// Camera of training view `k`.
+    /// Camera of training view `k`, as recorded: perturbed by the dataset's pose noise, if any
+    /// (the projections were computed with the exact camera).
     pub fn train_camera(&self, k: usize) -> Camera {
-        self.geometry.camera(self.train.angles[k])
+        let cam = self.geometry.camera(self.train.angles[k]);
+        match self
+            .manifest
+            .pose_noise
+            .as_ref()
+            .and_then(|p| p.views.get(k))
+        {
+            Some(v) => v.apply(&cam),
+            None => cam,
+        }
     }
     /// Camera of test view `k`.
     pub fn test_camera(&self, k: usize) -> Camera {

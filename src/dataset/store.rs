@@ -129,6 +129,9 @@ pub fn check(ds: &Dataset) -> Result<()> {
         check_volume_box(&ds.geometry, v.dims, v.spacing, v.offset)
             .map_err(|msg| Error::invalid("volume", msg))?;
     }
+    if let Some(p) = &ds.manifest.pose_noise {
+        super::pose::check(p, &ds.geometry, &ds.train.angles)?;
+    }
     Ok(())
 }
 

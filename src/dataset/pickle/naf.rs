@@ -384,6 +384,7 @@ pub fn from_naf(
         projector: "upstream TIGRE Ax (Siddon by default), not recomputed".into(),
         noise,
         extra,
+        pose_noise: None,
     };
     let ds = Dataset {
         geometry,
