@@ -12,6 +12,7 @@ use unispine::densify::{Stats, TrainState};
 use unispine::gaussians::Gaussians;
 use unispine::optim::{Adam, AdamConfig, N_GROUPS};
 use unispine::render::{ColorMode, RenderSettings};
+use unispine::train::checkpoint::Identity;
 use unispine::train::compact::Compaction;
 use unispine::train::{Checkpoint, EvalPoint, RunDir};
 
@@ -69,6 +70,13 @@ fn random_checkpoint(seed: u64, n: usize) -> Checkpoint {
         },
     };
     Checkpoint {
+        identity: Identity {
+            method: format!("method-{}", r.random::<u32>()),
+            color: format!("color-{}", r.random::<u32>()),
+            seed: r.random::<u64>() | 1,
+            dataset: format!("{:032x}", r.random::<u128>()),
+            config: format!("{:032x}", r.random::<u128>()),
+        },
         iteration: r.random_range(1..1_000_000),
         render: RenderSettings {
             color: colors[r.random_range(0..3)],
@@ -122,6 +130,7 @@ fn bits(g: &Gaussians<f32>) -> Vec<u32> {
 
 /// Every field of `b` equals `a`'s, bit for bit.
 fn assert_same(a: &Checkpoint, b: &Checkpoint) {
+    assert_eq!(a.identity, b.identity, "identity");
     assert_eq!(a.iteration, b.iteration, "iteration");
     assert_eq!(a.render, b.render, "render");
     assert_eq!(a.render.background.to_bits(), b.render.background.to_bits());
