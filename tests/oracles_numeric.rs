@@ -73,6 +73,7 @@ fn stratified_depths_fill_their_bins_from_near_to_far() {
 }
 
 #[test]
+#[allow(clippy::needless_range_loop)] // points, axes and depths indexed together
 fn samples_and_line_integral_of_a_constant_field() {
     let ray = fr::Ray {
         o: [0.8, -0.1, 0.05],
@@ -90,7 +91,13 @@ fn samples_and_line_integral_of_a_constant_field() {
     for i in 0..n {
         for a in 0..3 {
             let free = ray.o[a] + ray.d[a] * t[i];
-            let want = free.max(-b).min(b);
+            let want = if free < -b {
+                -b
+            } else if free > b {
+                b
+            } else {
+                free
+            };
             clamped += usize::from(want != free);
             assert!((pts[i][a] - want).abs() < 1e-15, "point {i} axis {a}");
         }
@@ -343,6 +350,7 @@ fn jacobian_clamp_on_all_four_sides() {
 mod tiny;
 
 #[test]
+#[allow(clippy::manual_clamp)] // written differently from the code's f32::clamp on purpose
 fn evaluation_clamps_the_render_in_every_colour_mode_and_background() {
     use unispine::eval;
     use unispine::render::{self, ColorMode, RenderSettings};
@@ -378,7 +386,18 @@ fn evaluation_clamps_the_render_in_every_colour_mode_and_background() {
                 let clamped = Image2d::from_vec(
                     img.width,
                     img.height,
-                    img.data.iter().map(|&v| v.max(0.0).min(1.0)).collect(),
+                    img.data
+                        .iter()
+                        .map(|&v| {
+                            if v < 0.0 {
+                                0.0
+                            } else if v > 1.0 {
+                                1.0
+                            } else {
+                                v
+                            }
+                        })
+                        .collect(),
                 );
                 let mse = clamped
                     .data

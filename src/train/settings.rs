@@ -216,12 +216,10 @@ macro_rules! settings {
         /// Every row with a range: its field and allowed interval, in table order (tests check
         /// their own table of expected intervals against it, endpoint by endpoint).
         pub fn declared_ranges() -> Vec<(&'static str, Interval)> {
-            let mut v = Vec::new();
-            $(
-                $(v.push(($field, $range));)?
-                $(v.push(($field, $range_opt));)?
-            )*
-            v
+            vec![$(
+                $(($field, $range),)?
+                $(($field, $range_opt),)?
+            )*]
         }
     };
 }
