@@ -82,6 +82,7 @@ fn random_checkpoint(seed: u64, n: usize) -> Checkpoint {
             color: colors[r.random_range(0..3)],
             active_features: [1, 4, 9, 16][r.random_range(0..4)],
             background: r.random_range(-2.0..2.0),
+            ..Default::default()
         },
         state,
         rng_word_pos: r.random::<u128>() | 1,

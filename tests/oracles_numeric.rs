@@ -373,6 +373,7 @@ fn evaluation_clamps_the_render_in_every_colour_mode_and_background() {
                 color,
                 active_features: 16,
                 background,
+                ..Default::default()
             };
             let got = eval::evaluate(&g, &ds, &targets, &settings).unwrap();
             let (mut psnr_sum, mut ssim_sum, mut outside) = (0.0, 0.0, 0usize);
