@@ -306,7 +306,10 @@ fn real_ct_cropped_to_the_spine() {
     let ct = manifest().join("data/cxr.nii.gz");
     let mask = manifest().join("data/mask.nii.gz");
     if !ct.is_file() || !mask.is_file() {
-        eprintln!("SKIPPED: data/cxr.nii.gz or data/mask.nii.gz absent; run `bash scripts/fetch-example-ct.sh`");
+        common::skip::skipped(
+            "real_ct_cropped_to_the_spine",
+            "data/cxr.nii.gz or data/mask.nii.gz absent; run `bash scripts/fetch-example-ct.sh`",
+        );
         return;
     }
     let tmp = tempfile::tempdir().unwrap();
@@ -346,7 +349,10 @@ fn shared_us() -> Option<PathBuf> {
     if f.is_file() {
         Some(f)
     } else {
-        eprintln!("SKIPPED: {} absent (set UNISPINE_SHARED_DATA)", f.display());
+        common::skip::skipped(
+            &f.display().to_string(),
+            "absent (set UNISPINE_SHARED_DATA)",
+        );
         None
     }
 }

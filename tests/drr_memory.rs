@@ -2,6 +2,9 @@
 //! memory at most 1.1 x the volume). Alone in its test binary so that no other test's
 //! allocations move the process's peak. Linux only (reads `/proc/self/status`).
 
+#[path = "common/skip.rs"]
+mod skip;
+
 use unispine::drr::{Method, Projector};
 use unispine::geometry::ConeBeam;
 use unispine::simd::Simd;
@@ -28,7 +31,10 @@ fn projection_peak_memory_is_within_a_tenth_of_the_volume() {
         .view(0.3)
         .unwrap();
     if std::fs::write("/proc/self/clear_refs", "5").is_err() {
-        eprintln!("cannot reset the peak resident memory here: skipped");
+        skip::skipped(
+            "the DRR memory test",
+            "cannot reset the peak resident memory here (/proc/self/clear_refs)",
+        );
         return;
     }
     let before = status_kib("VmRSS:").expect("VmRSS");

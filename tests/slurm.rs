@@ -3,6 +3,9 @@
 //! bit. Needs a running cluster (`bash scripts/slurm-local.sh start`, which `.ci/run` does);
 //! without one the test says so and passes.
 
+#[path = "common/skip.rs"]
+mod skip;
+
 use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -68,7 +71,12 @@ fn run(cmd: &mut Command) -> String {
 #[test]
 fn slurm_array_and_collect_job_equal_the_local_run() {
     if let Err(why) = slurm_up() {
-        eprintln!("SKIPPED: no Slurm cluster here: {why}. Start one with `bash scripts/slurm-local.sh start`.");
+        skip::skipped(
+            "the Slurm array test",
+            &format!(
+                "no Slurm cluster here: {why}. Start one with `bash scripts/slurm-local.sh start`."
+            ),
+        );
         return;
     }
     let tmp = tempfile::tempdir().unwrap();

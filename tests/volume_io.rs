@@ -1,6 +1,9 @@
 //! Volume readers, conversions and resampling: round trips on files written here, header errors
 //! that name the file and field, and the real CT / ultrasound volumes when present.
 
+#[path = "common/skip.rs"]
+mod skip;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -856,8 +859,9 @@ fn real_ct() -> Option<(PathBuf, PathBuf)> {
     if c.exists() && m.exists() {
         Some((c, m))
     } else {
-        eprintln!(
-            "SKIPPED: data/cxr.nii.gz or data/mask.nii.gz absent; run `bash scripts/fetch-example-ct.sh`"
+        skip::skipped(
+            "the real CT checks",
+            "data/cxr.nii.gz or data/mask.nii.gz absent; run `bash scripts/fetch-example-ct.sh`",
         );
         None
     }
@@ -870,9 +874,9 @@ fn shared_data() -> Option<PathBuf> {
     if dir.is_dir() {
         Some(dir)
     } else {
-        eprintln!(
-            "SKIPPED: shared data folder {} absent (set UNISPINE_SHARED_DATA)",
-            dir.display()
+        skip::skipped(
+            &format!("shared data folder {}", dir.display()),
+            "absent (set UNISPINE_SHARED_DATA)",
         );
         None
     }
@@ -949,7 +953,7 @@ fn real_ultrasound_phantom_header() {
         .join("us-spine-phantom")
         .join("SpinePhantomFreehandReconstructed.mha");
     if !p.exists() {
-        eprintln!("SKIPPED: {} absent", p.display());
+        skip::skipped(&p.display().to_string(), "absent");
         return;
     }
     let v = volume::load(&p).unwrap();

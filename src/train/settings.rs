@@ -212,6 +212,15 @@ macro_rules! settings {
         pub fn declared_fields() -> Vec<&'static str> {
             vec![$($field),*]
         }
+
+        /// Every row with a range: its field and allowed interval, in table order (tests check
+        /// their own table of expected intervals against it, endpoint by endpoint).
+        pub fn declared_ranges() -> Vec<(&'static str, Interval)> {
+            vec![$(
+                $(($field, $range),)?
+                $(($field, $range_opt),)?
+            )*]
+        }
     };
 }
 

@@ -214,7 +214,10 @@ pub fn run_numpy_reference(script: &str) {
             !ci,
             "CI=true but python3 with numpy is not available for {script}"
         );
-        println!("note: python3 + numpy not available; skipping {script}");
+        super::skip::skipped(
+            script,
+            "python3 with numpy is not available (CI=true makes this an error)",
+        );
         return;
     }
     let out = std::process::Command::new("python3")
