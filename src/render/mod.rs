@@ -129,6 +129,21 @@ pub struct Splats<R: Real> {
     pub color: Vec<R>,
 }
 
+impl<R: Real> Splats<R> {
+    /// `n` splats with every field zero (all culled).
+    pub fn zeros(n: usize) -> Self {
+        let z = R::zero();
+        Splats {
+            mean2d: vec![[z; 2]; n],
+            conic: vec![[z; 3]; n],
+            depth: vec![z; n],
+            radius: vec![0u32; n],
+            opacity: vec![z; n],
+            color: vec![z; n],
+        }
+    }
+}
+
 /// Gradient of a scalar loss with respect to the splat fields (same layout as [`Splats`]).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SplatGrads<R: Real> {

@@ -401,7 +401,8 @@ pub fn intensity_vjp<R: Real>(
     }
 }
 
-fn check_inputs<R: Real>(g: &Gaussians<R>, settings: &RenderSettings) -> Result<()> {
+/// The input checks of [`forward`]: lengths, finite values, active features.
+pub(crate) fn check_inputs<R: Real>(g: &Gaussians<R>, settings: &RenderSettings) -> Result<()> {
     let n = g.len();
     for (name, len) in [
         ("log_scales", g.log_scales.len()),
@@ -446,14 +447,7 @@ pub(crate) fn forward_with<R: Real>(
     let n = g.len();
     let cc = CamConsts::<R>::with_conventions(cam, &settings.conventions);
     let z = R::zero();
-    let mut s = Splats {
-        mean2d: vec![[z; 2]; n],
-        conic: vec![[z; 3]; n],
-        depth: vec![z; n],
-        radius: vec![0u32; n],
-        opacity: vec![z; n],
-        color: vec![z; n],
-    };
+    let mut s = Splats::zeros(n);
     let mut scale = vec![[z; 3]; n];
     s.mean2d
         .par_chunks_mut(CHUNK)

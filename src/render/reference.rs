@@ -95,18 +95,11 @@ pub fn forward<R: Real>(
     let conv = &settings.conventions;
     conv.validate()?;
     // Input checks (lengths, finiteness, active features) as the fast path.
-    project::forward(g, cam, settings)?;
+    project::check_inputs(g, settings)?;
     let n = g.len();
     let cc = CamConsts::<R>::with_conventions(cam, conv);
     let z = R::zero();
-    let mut s = Splats {
-        mean2d: vec![[z; 2]; n],
-        conic: vec![[z; 3]; n],
-        depth: vec![z; n],
-        radius: vec![0u32; n],
-        opacity: vec![z; n],
-        color: vec![z; n],
-    };
+    let mut s = Splats::zeros(n);
     let mut scale = vec![[z; 3]; n];
     let (w, h) = (cam.width, cam.height);
     let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
