@@ -30,6 +30,16 @@ fn sentinel(root: &Path) -> PathBuf {
     s
 }
 
+/// A temporary folder with a sentinel folder (and its listing) and an FDK plan `p.toml`.
+fn setup() -> (tempfile::TempDir, PathBuf, Vec<String>, PathBuf) {
+    let d = tempfile::tempdir().unwrap();
+    let sent = sentinel(d.path());
+    let before = tree_listing(&sent);
+    let plan = d.path().join("p.toml");
+    std::fs::write(&plan, fdk_plan("p")).unwrap();
+    (d, sent, before, plan)
+}
+
 /// Assert exit 1 with a message containing each of `words`, and no panic.
 fn refused(r: &Limited, words: &[&str]) {
     assert_eq!(r.code, 1, "exit {}\n{}", r.code, r.stderr);
@@ -245,12 +255,8 @@ fn stub_sbatch(dir: &Path) {
 
 #[test]
 fn generated_scripts_run_no_injected_command() {
-    let d = tempfile::tempdir().unwrap();
+    let (d, sent, before, plan) = setup();
     let root = d.path();
-    let sent = sentinel(root);
-    let before = tree_listing(&sent);
-    let plan = root.join("p.toml");
-    std::fs::write(&plan, fdk_plan("p")).unwrap();
     // An output folder whose name would run commands if it were not quoted.
     let out = root.join("out it's $(touch PWNED1) `touch PWNED2` \"q\"; touch PWNED3");
     let r = reproduce(
@@ -341,12 +347,8 @@ fn generated_scripts_run_no_injected_command() {
 
 #[test]
 fn nothing_is_written_or_removed_through_a_link_or_read_from_a_device() {
-    let d = tempfile::tempdir().unwrap();
+    let (d, sent, before, plan) = setup();
     let root = d.path();
-    let sent = sentinel(root);
-    let before = tree_listing(&sent);
-    let plan = root.join("p.toml");
-    std::fs::write(&plan, fdk_plan("p")).unwrap();
     let out = root.join("out");
     let args = [plan.to_str().unwrap(), "--out", out.to_str().unwrap()];
     let r = reproduce(&args, root);

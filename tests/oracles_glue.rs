@@ -296,22 +296,8 @@ fn row(dataset: &str, method: &str, seed: u64, sweep: Option<&str>, psnr: Option
         ssim: psnr.map(|_| 0.9),
         train_time_s: psnr.map(|p| 100.0 / p),
         fps: psnr.map(|p| p * 2.0),
-        n_gaussians: None,
-        unbounded_n: None,
-        unbounded_psnr: None,
-        peak_memory_mib: None,
-        wall_s: None,
-        error: None,
-        curve: Vec::new(),
         run_dir: format!("runs/{dataset}/{method}/seed{seed}"),
-        version: None,
-        git_commit: None,
-        dataset_checksum: None,
-        config_hash: None,
-        cpu_model: None,
-        cores: None,
-        simd: None,
-        threads: None,
+        ..Default::default()
     }
 }
 

@@ -175,7 +175,6 @@ mod tests {
         Row {
             index: 0,
             dataset: "d".into(),
-            paper_dataset: None,
             method: "m".into(),
             base: "m".into(),
             sweep_flag: Some("compact-keep".into()),
@@ -185,25 +184,11 @@ mod tests {
             status: "done".into(),
             completed: true,
             psnr: Some(psnr),
-            ssim: None,
-            train_time_s: None,
             fps: Some(100.0 + n as f64),
             n_gaussians: Some(n),
             unbounded_n: Some(unb.0),
             unbounded_psnr: Some(unb.1),
-            peak_memory_mib: None,
-            wall_s: None,
-            error: None,
-            curve: vec![],
-            run_dir: String::new(),
-            version: None,
-            git_commit: None,
-            dataset_checksum: None,
-            config_hash: None,
-            cpu_model: None,
-            cores: None,
-            simd: None,
-            threads: None,
+            ..Default::default()
         }
     }
 

@@ -457,14 +457,7 @@ fn per_gaussian_bits<R: Real>(
     let (mode, active) = (st.color, st.active_features);
     let z = R::zero();
     let n = g.len();
-    let mut s = Splats {
-        mean2d: vec![[z; 2]; n],
-        conic: vec![[z; 3]; n],
-        depth: vec![z; n],
-        radius: vec![0u32; n],
-        opacity: vec![z; n],
-        color: vec![z; n],
-    };
+    let mut s = Splats::zeros(n);
     let mut gr = Gaussians::<R>::zeros(n);
     for i in 0..n {
         let (geo, depth) = project_geom(&cc, g.means[i], g.log_scales[i], g.quats[i]);
