@@ -99,8 +99,9 @@ impl Default for GenerateOptions {
 /// Most views per split (training or test).
 pub const MAX_VIEWS: usize = 100_000;
 
-/// Most bytes of projections (f32) a dataset may hold: (training + test views) x detector^2 x 4.
-pub const MAX_PROJECTION_BYTES: u64 = 8 << 30;
+/// Most bytes of projections (f32) a dataset may hold: (training + test views) x detector^2 x 4
+/// (the projector's own bound).
+pub use crate::drr::MAX_PROJECTION_BYTES;
 
 impl GenerateOptions {
     /// Error naming the option when it cannot give a dataset (each bound with its allowed

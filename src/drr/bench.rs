@@ -12,7 +12,8 @@
 
 use std::time::Instant;
 
-use super::{clip_ray, siddon, trilinear, MarchLanes, Method, Projector};
+use super::grid::clip_ray;
+use super::{siddon, trilinear, MarchLanes, Method, Projector};
 use crate::error::Result;
 use crate::geometry::ConeBeam;
 use crate::real::Real;

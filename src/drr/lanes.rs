@@ -8,6 +8,10 @@
 //! positions, is written in AVX2 and AVX-512 directly). Every lane performs
 //! the IEEE operations of the per-ray loop in the same order (no fused multiply-add anywhere),
 //! so every path gives the same bits (`tests/drr_simd.rs` compares them).
+//!
+//! Longer than 600 lines because the trait and its three implementations (AVX2, AVX2 with
+//! AVX-512VL's conversions, AVX-512) are read side by side: an operation's semantics must match
+//! across them lane for lane.
 
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
@@ -517,6 +521,16 @@ unsafe fn pair(data: &[f32], idx: &[i32], off: usize, k: usize) -> i64 {
             .add(idx[k] as usize + off)
             .cast::<i64>()
             .read_unaligned()
+    }
+}
+
+/// A `dyn Iterator` as a sized one (the ray source is called once per ray, not per step).
+pub(super) struct DynIter<'a, T>(pub(super) &'a mut dyn Iterator<Item = T>);
+
+impl<T> Iterator for DynIter<'_, T> {
+    type Item = T;
+    fn next(&mut self) -> Option<T> {
+        self.0.next()
     }
 }
 

@@ -277,8 +277,8 @@ crate::simd::wide_kernels! {
 
 #[cfg(all(test, target_arch = "x86_64"))]
 mod tests {
+    use super::super::grid::Grid;
     use super::super::trilinear::{sum_padded, Run};
-    use super::super::Grid;
     use crate::simd::Simd;
     use rand::{RngExt, SeedableRng};
 
@@ -289,7 +289,7 @@ mod tests {
     fn lanes_sum_the_runs_as_the_per_ray_loop() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         for case in 0..300 {
-            let (n, data) = super::super::random_values::<f32>(&mut rng, 5);
+            let (n, data) = super::super::grid::random_values::<f32>(&mut rng, 5);
             let grid = Grid::unit(&data, n);
             let runs: Vec<Run> = (0..rng.random_range(0..12))
                 .map(|_| {

@@ -9,7 +9,7 @@
 //! precision far from the source). The walk ends when an axis crosses its last boundary, which
 //! is decided with integer counters, so voxel indices never leave the grid whatever the rounding.
 
-use super::{clip_ray, Grid};
+use super::grid::{clip_ray, Grid};
 use crate::geometry::Camera;
 use crate::real::Real;
 

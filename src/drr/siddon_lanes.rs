@@ -141,6 +141,6 @@ crate::simd::wide_kernels! {
         out: &mut [f32],
     );
     // SAFETY (both): as this function.
-    run_avx2 => { unsafe { run::<super::lanes::Avx2>(data, &mut super::DynIter(rays), out) } }
-    run_avx512 => { unsafe { run::<super::lanes::Avx512>(data, &mut super::DynIter(rays), out) } }
+    run_avx2 => { unsafe { run::<super::lanes::Avx2>(data, &mut super::lanes::DynIter(rays), out) } }
+    run_avx512 => { unsafe { run::<super::lanes::Avx512>(data, &mut super::lanes::DynIter(rays), out) } }
 }

@@ -22,7 +22,7 @@
 //! Samples whose 8 neighbours are all inside the grid take a fast path without bounds logic;
 //! the few within one voxel of a face take the zero-padded path.
 
-use super::{clip_ray, Grid};
+use super::grid::{clip_ray, Grid};
 use crate::geometry::{Camera, Mode};
 use crate::math::round::{ceil, floor};
 use crate::real::Real;
@@ -450,7 +450,7 @@ fn sample_padded<R: Real>(grid: &Grid<R>, q: [f64; 3]) -> R {
 
 #[cfg(test)]
 mod tests {
-    use super::super::Grid;
+    use super::super::grid::Grid;
     use crate::real::Real;
     use rand::{RngExt, SeedableRng};
 
@@ -484,7 +484,7 @@ mod tests {
     fn check<R: Real>(seed: u64) {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         for _ in 0..200 {
-            let (n, data) = super::super::random_values::<R>(&mut rng, 4);
+            let (n, data) = super::super::grid::random_values::<R>(&mut rng, 4);
             let grid = Grid::unit(&data, n);
             for _ in 0..200 {
                 // Outside, on the faces' half-voxel shells, on lattice points, inside.

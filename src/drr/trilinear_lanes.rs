@@ -197,13 +197,13 @@ crate::simd::wide_kernels! {
         out: &mut [f32],
     );
     // SAFETY (both): as this function.
-    run_avx2 => { unsafe { run::<super::lanes::Avx2>(data, n, &mut super::DynIter(rays), out) } }
+    run_avx2 => { unsafe { run::<super::lanes::Avx2>(data, n, &mut super::lanes::DynIter(rays), out) } }
     // AVX2's 8 lanes with AVX-512's encoding, 32 registers and unsigned conversion: where
     // 512-bit operations run as two halves (AMD Zen 4), 16 lanes measured slower (AP view 1.34x
     // the per-ray loop against 1.43x, lateral 1.49x against 1.81x, an earlier version of this
     // kernel), and AVX-512 gathers of the pairs slower still (AP 0.87x).
     run_avx512 => {
-        unsafe { run::<super::lanes::Avx2Vl>(data, n, &mut super::DynIter(rays), out) }
+        unsafe { run::<super::lanes::Avx2Vl>(data, n, &mut super::lanes::DynIter(rays), out) }
     }
 }
 
@@ -222,5 +222,5 @@ pub(crate) unsafe fn run_avx512_16(
     out: &mut [f32],
 ) {
     // SAFETY: as this function.
-    unsafe { run::<super::lanes::Avx512>(data, n, &mut super::DynIter(rays), out) }
+    unsafe { run::<super::lanes::Avx512>(data, n, &mut super::lanes::DynIter(rays), out) }
 }

@@ -1,0 +1,218 @@
+//! The voxel grid as the projectors see it: its placement, the checks of a volume against a
+//! geometry, and the clipping of a line or a ray to the grid's box.
+
+use rayon::prelude::*;
+
+use crate::error::{Error, Result};
+use crate::geometry::{Camera, ConeBeam, Mode};
+use crate::real::Real;
+use crate::simd::Simd;
+use crate::volume::Volume;
+
+/// Relative tolerance when comparing the geometry's `dVoxel` / `offOrigin` with the volume's
+/// `spacing` / `offset` (the two usually come from different files, one of them JSON text).
+pub const GRID_REL_TOL: f64 = 1e-6;
+
+/// The voxel grid as the ray-marchers see it.
+pub(crate) struct Grid<'a, R: Real> {
+    /// Voxel values, x fastest.
+    pub data: &'a [R],
+    /// Voxel counts `[x, y, z]`.
+    pub n: [usize; 3],
+    /// Voxel size `[x, y, z]`, mm.
+    pub s: [f64; 3],
+    /// Box corners (world, mm).
+    pub lo: [f64; 3],
+    pub hi: [f64; 3],
+}
+
+impl<'a, R: Real> Grid<'a, R> {
+    pub(super) fn new(vol: &'a Volume<R>) -> Self {
+        let (lo, hi) = vol.bounds();
+        Grid {
+            data: &vol.data,
+            n: vol.dims,
+            s: vol.spacing,
+            lo,
+            hi,
+        }
+    }
+
+    /// The grid of `data` with `n` voxels of 1 mm from the origin.
+    #[cfg(test)]
+    pub(super) fn unit(data: &'a [R], n: [usize; 3]) -> Self {
+        Grid {
+            data,
+            n,
+            s: [1.0; 3],
+            lo: [0.0; 3],
+            hi: n.map(|v| v as f64),
+        }
+    }
+}
+
+/// Voxel counts in `1..=max` per axis and values for them: both signs, zeros of both signs and
+/// tiny ones (products that underflow).
+#[cfg(test)]
+pub(super) fn random_values<R: Real>(rng: &mut impl rand::Rng, max: usize) -> ([usize; 3], Vec<R>) {
+    use rand::RngExt;
+    let n = [0; 3].map(|_| rng.random_range(1..=max));
+    let data = (0..n[0] * n[1] * n[2])
+        .map(|_| match rng.random_range(0..6) {
+            0 => R::c(0.0),
+            1 => R::c(-0.0),
+            2 => R::c(rng.random_range(-1e-38..1e-38)),
+            _ => R::c(rng.random_range(-3.0..3.0)),
+        })
+        .collect();
+    (n, data)
+}
+
+/// Parameter interval `(t_near, t_far)` of the line `o + t d` inside the box `[lo, hi]` (slab
+/// test). The interval is empty when `t_far <= t_near`. For a direction component that is
+/// exactly 0 the line is inside the slab when `lo <= o < hi` (half-open, as voxel indices are).
+#[inline]
+pub(crate) fn clip_line(o: [f64; 3], d: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> (f64, f64) {
+    let mut t0 = f64::NEG_INFINITY;
+    let mut t1 = f64::INFINITY;
+    for a in 0..3 {
+        if d[a] == 0.0 {
+            if !(o[a] >= lo[a] && o[a] < hi[a]) {
+                return (f64::INFINITY, f64::NEG_INFINITY);
+            }
+        } else {
+            let inv = 1.0 / d[a];
+            let (ta, tb) = ((lo[a] - o[a]) * inv, (hi[a] - o[a]) * inv);
+            let (ta, tb) = if ta <= tb { (ta, tb) } else { (tb, ta) };
+            t0 = t0.max(ta);
+            t1 = t1.min(tb);
+        }
+    }
+    (t0, t1)
+}
+
+/// The part of the ray of `cam` (origin `o`, unit direction `d`) inside `[lo, hi]`: the whole
+/// line for a parallel beam, the half-line beyond the source for a cone beam.
+#[inline]
+pub(crate) fn clip_ray(
+    cam: &Camera,
+    o: [f64; 3],
+    d: [f64; 3],
+    lo: [f64; 3],
+    hi: [f64; 3],
+) -> Option<(f64, f64)> {
+    let (mut t0, t1) = clip_line(o, d, lo, hi);
+    if cam.mode == Mode::Cone {
+        t0 = t0.max(0.0);
+    }
+    (t1 > t0).then_some((t0, t1))
+}
+
+/// `geo`'s grid fields must describe `vol`'s grid.
+pub(super) fn check_grid<R: Real>(vol: &Volume<R>, geo: &ConeBeam) -> Result<()> {
+    if geo.n_voxel != vol.dims {
+        return Err(Error::invalid(
+            "nVoxel",
+            format!(
+                "the geometry says {:?} but the volume has {:?} voxels [x, y, z]",
+                geo.n_voxel, vol.dims
+            ),
+        ));
+    }
+    if vol.data.len() != vol.dims.iter().product::<usize>() {
+        return Err(Error::invalid(
+            "volume",
+            format!("{} values for dims {:?}", vol.data.len(), vol.dims),
+        ));
+    }
+    for a in 0..3 {
+        let (g, v) = (geo.d_voxel[a], vol.spacing[a]);
+        if !(v.is_finite() && v > 0.0) {
+            return Err(Error::invalid(
+                format!("volume spacing[{a}]"),
+                format!("must be finite and > 0, got {v}"),
+            ));
+        }
+        if (g - v).abs() > GRID_REL_TOL * v {
+            return Err(Error::invalid(
+                format!("dVoxel[{a}]"),
+                format!("the geometry says {g} mm but the volume's voxel size is {v} mm"),
+            ));
+        }
+        let (g, v) = (geo.off_origin[a], vol.offset[a]);
+        let scale = vol.dims[a] as f64 * vol.spacing[a];
+        if !v.is_finite() || (g - v).abs() > GRID_REL_TOL * scale {
+            return Err(Error::invalid(
+                format!("offOrigin[{a}]"),
+                format!("the geometry says {g} mm but the volume's offset is {v} mm"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Error naming the first NaN / infinite voxel; the scan is parallel over fixed chunks and the
+/// first bad chunk is found in order, so the voxel named does not depend on the thread count.
+pub(super) fn check_finite_par<R: Real>(vol: &Volume<R>) -> Result<()> {
+    const C: usize = 1 << 16;
+    let bad = vol
+        .data
+        .par_chunks(C)
+        .position_first(|c| c.iter().any(|v| !v.is_finite()));
+    match bad {
+        None => Ok(()),
+        Some(_) => vol.check_finite("volume"),
+    }
+}
+
+/// The grid and output band as f32 when the vector kernels can run them: an f32 volume of fewer
+/// than 2^31 voxels (i32 lane indices) and a vector path.
+pub(super) fn lanes_f32<'g, 'o, R: Real>(
+    simd: Simd,
+    grid: &Grid<'g, R>,
+    out: &'o mut [R],
+) -> Option<(Grid<'g, f32>, &'o mut [f32])> {
+    let data = lane_data(simd, grid.data)?;
+    // SAFETY: R is f32 (`lane_data` checked it): same size, alignment and bits.
+    let out = unsafe { std::slice::from_raw_parts_mut(out.as_mut_ptr().cast::<f32>(), out.len()) };
+    Some((
+        Grid {
+            data,
+            n: grid.n,
+            s: grid.s,
+            lo: grid.lo,
+            hi: grid.hi,
+        },
+        out,
+    ))
+}
+
+/// The voxel values as f32 when the vector kernels can run them: `simd` is a vector path, the
+/// values are f32 and fewer than 2^31 (i32 lane indices).
+pub(super) fn lane_data<R: Real>(simd: Simd, data: &[R]) -> Option<&[f32]> {
+    if simd == Simd::Scalar
+        || std::any::TypeId::of::<R>() != std::any::TypeId::of::<f32>()
+        || data.len() >= 1 << 31
+    {
+        return None;
+    }
+    // SAFETY: R is f32 (checked above): same size, alignment and bits.
+    Some(unsafe { std::slice::from_raw_parts(data.as_ptr().cast::<f32>(), data.len()) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clip_line_slab() {
+        let (t0, t1) = clip_line([-5.0, 0.5, 0.5], [1.0, 0.0, 0.0], [0.0; 3], [1.0; 3]);
+        assert_eq!((t0, t1), (5.0, 6.0));
+        // On the upper face (half-open): outside.
+        let (t0, t1) = clip_line([-5.0, 1.0, 0.5], [1.0, 0.0, 0.0], [0.0; 3], [1.0; 3]);
+        assert!(t1 <= t0);
+        // On the lower face: inside.
+        let (t0, t1) = clip_line([-5.0, 0.0, 0.5], [1.0, 0.0, 0.0], [0.0; 3], [1.0; 3]);
+        assert!(t1 > t0);
+    }
+}
