@@ -4,14 +4,15 @@
 //! The modules below are listed in data-flow order; reading them top to bottom is the pipeline:
 //!
 //! ```text
-//! volume (CT NIfTI / US MetaImage / built-in phantom / US-like proxy)
-//!   -> geometry (TIGRE cone beam, per-angle cameras)
+//! geometry (TIGRE cone beam, per-angle cameras, voxel placement)
+//!   -> volume (CT NIfTI / US MetaImage / built-in phantom / US-like proxy)
 //!   -> drr (Siddon and trilinear line integrals)
 //!   -> dataset (train/test views, stored as json + npy)
 //!   -> gaussians (Eq. 1 model, Eq. 2 RIRF, ACUI init, PLY)
 //!   -> render (Eqs. 3-5: projection, tiles, compositing; forward + backward)
 //!   -> loss (Eqs. 6-9: SPWM, weighted Charbonnier, SSIM)
-//!   -> optim (Adam, schedules) -> densify -> eval (PSNR, SSIM, fps) -> train -> report
+//!   -> optim (Adam, schedules) -> densify -> eval (PSNR, SSIM, fps) -> train
+//!   -> baseline (FDK, neural fields behind `train --method`) -> reproduce -> report
 //! ```
 
 // The library never prints (progress leaves as events, `train::event`); only the binary
@@ -24,21 +25,22 @@ pub mod error;
 pub mod fingerprint;
 /// Atomic file writes (temporary name + rename) and output-folder hygiene.
 pub mod fsio;
+pub mod real;
+
 pub mod image2d;
 pub mod math;
 pub mod par;
 pub mod preview;
-pub mod real;
 pub mod simd;
 
 // The pipeline, in data-flow order (one stage per module).
 
+/// TIGRE cone-beam geometry and the per-angle camera (and where a volume's voxels lie).
+pub mod geometry;
+
 /// Volumes: NIfTI / MetaImage / npy readers, HU conversion, crop, resampling, the phantom and
 /// the ultrasound-like proxy.
 pub mod volume;
-
-/// TIGRE cone-beam geometry and the per-angle camera.
-pub mod geometry;
 
 /// Our DRR ray-marchers (Siddon, trilinear).
 pub mod drr;
@@ -68,21 +70,21 @@ pub mod densify;
 /// renderer, trainer; forward + backward.
 pub mod field;
 
-/// Method presets and the training loop.
-pub mod train;
-
 /// Evaluation: PSNR, SSIM, fps (also run inside the training loop).
 pub mod eval;
+
+/// Method presets and the training loop.
+pub mod train;
 
 /// Table 1's baselines behind `train --method`: scoring of predicted line integrals, run folder,
 /// a field run's checkpoints and resume.
 pub mod baseline;
 
-/// Tables of finished runs.
-pub mod report;
-
 /// `unispine reproduce`: plans of datasets x methods x seeds, tables with verdicts, charts.
 pub mod reproduce;
+
+/// Tables of finished runs and the reproduction report (Markdown, HTML, SVG charts).
+pub mod report;
 
 /// Numerical audits: gradient checks against finite differences, benchmark scenes.
 pub mod audit;

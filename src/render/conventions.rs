@@ -83,17 +83,24 @@ pub struct Conventions {
     pub jacobian_limits: JacobianLimits,
 }
 
+/// 3DGS near plane: Gaussians with camera-space depth z <= NEAR are culled.
+pub const NEAR: f64 = 0.2;
+/// Low-pass dilation added to the diagonal of Sigma2D, px^2.
+pub const DILATION: f64 = 0.3;
+/// Radius = ceil(RADIUS_SIGMAS sqrt(lambda_max)).
+pub const RADIUS_SIGMAS: f64 = 3.0;
+
 impl Default for Conventions {
     fn default() -> Self {
         Conventions {
             alpha_max: super::composite::ALPHA_MAX,
             t_stop: TStop::Exclusive,
-            radius_sigmas: super::project::RADIUS_SIGMAS,
+            radius_sigmas: RADIUS_SIGMAS,
             radius_rule: RadiusRule::Eigen,
-            eps2d: super::project::DILATION,
+            eps2d: DILATION,
             pixel_center: 0.5,
             clamp_gradient: ClampGradient::Zero,
-            near_plane: super::project::NEAR,
+            near_plane: NEAR,
             jacobian_limits: JacobianLimits::Symmetric,
         }
     }

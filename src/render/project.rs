@@ -62,14 +62,9 @@ use crate::simd::Simd;
 
 mod blocks;
 
-/// 3DGS near plane: Gaussians with camera-space depth z <= NEAR are culled.
-pub const NEAR: f64 = 0.2;
-/// Low-pass dilation added to the diagonal of Sigma2D, px^2.
-pub const DILATION: f64 = 0.3;
+pub use super::conventions::{DILATION, NEAR, RADIUS_SIGMAS};
 /// Jacobian clamp factor: |x/z| <= CLAMP tan(fov/2) inside J.
 pub const CLAMP: f64 = 1.3;
-/// Radius = ceil(RADIUS_SIGMAS sqrt(lambda_max)).
-pub const RADIUS_SIGMAS: f64 = 3.0;
 /// 3DGS's floor on the eigenvalue discriminant mid^2 - det.
 pub const DISCRIMINANT_FLOOR: f64 = 0.1;
 
