@@ -48,11 +48,13 @@
 //! during the tile loop, and the rest after it), so image and gradients are bit-identical for
 //! any thread count. No atomics.
 //!
-//! The stage in four files, by job:
+//! The stage in five files, by job:
 //! - `worklist`: per-splat pixel boxes, per-row chord tests and the per-tile work lists that
 //!   both passes walk ([`WorkLists`]);
 //! - `forward`: the Eq. (4)-(5) forward tile kernel and the image assembly;
 //! - `backward`: the VJP tile kernel and the sequential gradient reduction;
+//! - `colsum`: an entry's gradient record from the backward's per-column sums (the order
+//!   above; with AVX-512 the seven sums advance side by side in one vector);
 //! - `dispatch`: the kernels compiled per instruction set and lane width
 //!   ([`Simd`](crate::simd::Simd)).
 //!
@@ -65,6 +67,7 @@ use super::tiles::{TileBins, TILE};
 use super::Splats;
 
 mod backward;
+mod colsum;
 mod dispatch;
 mod forward;
 mod naive;

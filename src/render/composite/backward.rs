@@ -11,6 +11,7 @@ use rayon::prelude::*;
 use super::super::lanes::{add_blend, exp_k, mask, power_of, sel};
 use super::super::tiles::TILE;
 use super::super::SplatGrads;
+use super::colsum::column_sums;
 use super::dispatch::{self, Kernel};
 use super::worklist::{pack, tile_entries, Entry, Packed};
 use super::{
@@ -29,13 +30,14 @@ pub(super) type Rec<R> = (u32, [R; 7]);
 pub(super) type TileGrads<R> = (Vec<Rec<R>>, KernelWork);
 
 /// The backward kernel of tile `t`, `W` pixels per lane vector (see
-/// [`forward_tile`](super::forward::forward_tile)). Its steps are the pixel pairs of
+/// [`forward_tile`](super::forward::forward_tile)); `X512`: compiled for AVX-512 (the record
+/// sums of [`column_sums`]). Its steps are the pixel pairs of
 /// [`slot_index`]: for one 8-column half of the tile, that half of an even tile row and of the
 /// row below it, 16 pixels (one step with 16 lanes, two with 8). Per column the backward keeps
 /// two sums, over the even and over the odd rows, each adding its rows in ascending order, and
 /// adds them (even + odd) at the end of the entry: both widths give the same bits.
 #[inline(always)]
-pub(super) fn backward_tile<R: Real, const W: usize>(
+pub(super) fn backward_tile<R: Real, const W: usize, const X512: bool>(
     packed: &[Option<Packed<R>>],
     saved: &CompositeSaved<R>,
     d_image: &Image2d<R>,
@@ -160,22 +162,8 @@ pub(super) fn backward_tile<R: Real, const W: usize>(
             }
         }
         if any > 0 {
-            // Per column: even rows + odd rows; then the columns in order. (Plain loops: the
-            // closures of `map` / `from_fn` are not always inlined into the kernel, and then
-            // not compiled for its instruction set.)
-            let mut acc = [zero; 7];
-            for (a, l) in acc.iter_mut().zip(&lanes.0) {
-                let mut cols = [zero; TILE];
-                for (c, v) in cols.iter_mut().enumerate() {
-                    let i = 16 * (c / 8) + c % 8;
-                    *v = l[i] + l[i + 8];
-                }
-                let mut sum = zero;
-                for v in &cols[k0..k1] {
-                    sum += *v;
-                }
-                *a = sum;
-            }
+            // Per column: even rows + odd rows; then the columns in order.
+            let acc = column_sums::<R, X512>(&lanes.0, k0, k1);
             recs.push((e.id, acc));
         }
     }

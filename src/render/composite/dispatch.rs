@@ -88,7 +88,7 @@ pub(super) fn backward_tile<R: Real>(
         _ => {}
     }
     let _ = k;
-    super::backward::backward_tile::<R, 8>(s, saved, d_image, t)
+    super::backward::backward_tile::<R, 8, false>(s, saved, d_image, t)
 }
 
 crate::simd::wide_kernels! {
@@ -98,6 +98,6 @@ crate::simd::wide_kernels! {
         d_image: &Image2d<R>,
         t: usize,
     ) -> TileGrads<R>;
-    backward_tile_avx2 => { super::backward::backward_tile::<R, W>(s, saved, d_image, t) }
-    backward_tile_avx512 => { super::backward::backward_tile::<R, W>(s, saved, d_image, t) }
+    backward_tile_avx2 => { super::backward::backward_tile::<R, W, false>(s, saved, d_image, t) }
+    backward_tile_avx512 => { super::backward::backward_tile::<R, W, true>(s, saved, d_image, t) }
 }
