@@ -1,7 +1,8 @@
 //! `ARCHITECTURE.md`'s equation -> code -> test index names only files and items that exist:
 //! every path (braces and `*` expanded) matches a file or folder, every item after a path is a
 //! word of that file, every `module::path::tests` is a module with tests, every
-//! `tests/FILE.rs::name` is a function of that file.
+//! `tests/FILE.rs::name` is a function of that file. `paper_notes.md` is held to the same rules
+//! for the project's own names (its other code spans name upstream files).
 
 use std::path::{Path, PathBuf};
 
@@ -93,28 +94,12 @@ fn every_file_and_item_the_index_names_exists() {
                     continue; // a command line, not a name
                 }
                 checked += 1;
-                if let Some((file, item)) = span.split_once(".rs::") {
-                    let p = root().join(format!("{file}.rs"));
-                    let ok = std::fs::read_to_string(&p)
-                        .is_ok_and(|t| t.contains(&format!("fn {item}(")));
-                    if !ok {
+                if span.contains(".rs::") {
+                    if !test_fn_exists(span) {
                         missing.push(span.to_string());
                     }
                 } else if span.contains("::") {
-                    let segs: Vec<&str> = span.split("::").collect();
-                    let ok = module_file(&segs).is_some_and(|(file, used)| {
-                        let text = std::fs::read_to_string(&file).unwrap();
-                        let dir = file.with_extension("");
-                        let dir = if file.ends_with("mod.rs") {
-                            file.parent().unwrap().to_path_buf()
-                        } else {
-                            dir
-                        };
-                        segs[used..].iter().all(|s| {
-                            has_word(&text, s) || (*s == "tests" && dir.join("tests.rs").is_file())
-                        })
-                    });
-                    if !ok {
+                    if !module_item_exists(span) {
                         missing.push(span.to_string());
                     }
                 } else if span.contains('/') || span.ends_with(".rs") || span.ends_with(".py") {
@@ -149,6 +134,82 @@ fn every_file_and_item_the_index_names_exists() {
     );
 }
 
+/// Whether a `tests/FILE.rs::name` span names a function of that file.
+fn test_fn_exists(span: &str) -> bool {
+    span.split_once(".rs::").is_some_and(|(file, item)| {
+        std::fs::read_to_string(root().join(format!("{file}.rs")))
+            .is_ok_and(|t| t.contains(&format!("fn {item}(")))
+    })
+}
+
+/// Whether `a::b::c` names a module of the crate and words of its file (a trailing `tests` may
+/// be a `tests.rs` beside it).
+fn module_item_exists(span: &str) -> bool {
+    let segs: Vec<&str> = span.split("::").collect();
+    module_file(&segs).is_some_and(|(file, used)| {
+        let text = std::fs::read_to_string(&file).unwrap();
+        let dir = if file.ends_with("mod.rs") {
+            file.parent().unwrap().to_path_buf()
+        } else {
+            file.with_extension("")
+        };
+        segs[used..]
+            .iter()
+            .all(|s| has_word(&text, s) || (*s == "tests" && dir.join("tests.rs").is_file()))
+    })
+}
+
+/// Whether `path` (braces and `*` expanded) matches something below the root or `src/`.
+fn path_exists(span: &str) -> bool {
+    expand(span).iter().all(|pat| {
+        [root(), root().join("src")]
+            .iter()
+            .any(|base| !glob(base, pat).is_empty())
+    })
+}
+
+#[test]
+fn every_project_name_in_paper_notes_exists() {
+    let doc = std::fs::read_to_string(root().join("paper_notes.md")).unwrap();
+    const PROJECT_DIRS: [&str; 7] = [
+        "tests/", "tools/", "golden/", "docs/", "scripts/", "benches/", "python/",
+    ];
+    let top_module = |seg: &str| {
+        let src = root().join("src");
+        src.join(format!("{seg}.rs")).is_file() || src.join(seg).join("mod.rs").is_file()
+    };
+    let (mut checked, mut missing) = (0, Vec::new());
+    for span in doc.split('`').skip(1).step_by(2) {
+        if span.contains(char::is_whitespace) || span.is_empty() {
+            continue;
+        }
+        let ok = if span.contains(".rs::") {
+            test_fn_exists(span)
+        } else if span.contains("::") {
+            if !top_module(span.split("::").next().unwrap()) {
+                continue; // a type's item or a test file's function, named in context
+            }
+            module_item_exists(span)
+        } else if span.ends_with(".rs") || PROJECT_DIRS.iter().any(|d| span.starts_with(d)) {
+            path_exists(span)
+        } else {
+            continue;
+        };
+        checked += 1;
+        if !ok {
+            missing.push(span.to_string());
+        }
+    }
+    assert!(
+        checked > 100,
+        "only {checked} names found in paper_notes.md"
+    );
+    assert!(
+        missing.is_empty(),
+        "paper_notes.md names what does not exist: {missing:#?}"
+    );
+}
+
 #[test]
 fn the_checker_sees_a_wrong_name() {
     assert!(wild("eq0*-vjp", "eq01-covariance-vjp"));
@@ -159,5 +220,12 @@ fn the_checker_sees_a_wrong_name() {
         .iter()
         .any(|p| p.exists()));
     assert!(has_word("pub struct Metrics {", "Metrics"));
+    assert!(module_item_exists("render::project::tests"));
+    assert!(!module_item_exists("render::project::no_such_item"));
+    assert!(test_fn_exists(
+        "tests/architecture.rs::the_checker_sees_a_wrong_name"
+    ));
+    assert!(!test_fn_exists("tests/architecture.rs::no_such_test"));
+    assert!(path_exists("render/{project,tiles}.rs") && !path_exists("render/{project,nope}.rs"));
     assert!(!has_word("pub struct MetricsX {", "Metrics"));
 }
