@@ -3,12 +3,14 @@
 //! settings are errors naming them.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 use unispine::train::Metrics;
 
+mod common;
+
 fn unispine(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_unispine"))
+    common::cli::bin()
         .args(args)
         .current_dir(cwd)
         .output()
@@ -193,7 +195,7 @@ fn a_signal_stops_a_field_run_with_its_model_and_metrics() {
     let d = dir.path();
     phantom(d, 32, 16, 4, 2);
     for (sig, code, name) in [(libc::SIGTERM, 143, "term"), (libc::SIGINT, 130, "int")] {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_unispine"))
+        let mut child = common::cli::bin()
             .args([
                 "train", "--data", "ph", "--method", "naf", "--iters", "1000000",
             ])

@@ -12,9 +12,8 @@ use unispine::render::{self, tiles, ColorMode, RenderSettings};
 use unispine::simd::Simd;
 use unispine::train::compact::{self, CompactConfig};
 use unispine::train::{self, Control, Event, Method, RunDir, TrainOverrides, Trainer};
-
-#[path = "common/tiny.rs"]
-mod tiny;
+mod common;
+use common::tiny;
 
 fn quiet(_: &Event) {}
 
@@ -359,7 +358,7 @@ fn bad_compaction_settings_name_the_flag() {
     assert_eq!(c.total_iterations(), 60);
     assert_eq!(c.compact_at(), Some(50));
     // Through the binary: exit code 1 and the flag in the message.
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_unispine"))
+    let out = common::cli::bin()
         .args([
             "train",
             "--data",

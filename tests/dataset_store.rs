@@ -8,6 +8,8 @@ use unispine::geometry::ConeBeam;
 use unispine::image2d::Image2d;
 use unispine::volume::{Provenance, Volume};
 
+mod common;
+
 fn geometry() -> ConeBeam {
     ConeBeam {
         off_origin: [0.5, -1.0, 2.0],
@@ -324,7 +326,7 @@ fn saving_over_a_dataset_leaves_no_mix() {
     // The CLI refuses to overwrite its input.
     std::fs::remove_file(d.join("previews")).unwrap();
     store::save(&dataset(2, 1), d).unwrap();
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_unispine"))
+    let out = common::cli::bin()
         .args(["data", "ct", "--volume"])
         .arg(d.join("volume.npy"))
         .arg("--out")

@@ -2,13 +2,12 @@
 //! memory at most 1.1 x the volume). Alone in its test binary so that no other test's
 //! allocations move the process's peak. Linux only (reads `/proc/self/status`).
 
-#[path = "common/skip.rs"]
-mod skip;
-
 use unispine::drr::{Method, Projector};
 use unispine::geometry::ConeBeam;
 use unispine::simd::Simd;
 use unispine::volume::Volume;
+mod common;
+use common::skip;
 
 fn status_kib(key: &str) -> Option<u64> {
     let s = std::fs::read_to_string("/proc/self/status").ok()?;

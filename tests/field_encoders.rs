@@ -8,14 +8,14 @@
 //! - bit-identical encoder backward and training gradients for 1, 2 and 8 threads;
 //! - bad encoder settings are errors naming the setting.
 
-use std::process::Command;
-
 use unispine::audit::{self, field as fc};
 use unispine::field::encode::{DenseGrid, Encoder, GridMap, HashGrid, TensorVm, VmLines};
 use unispine::field::mlp::OutAct;
 use unispine::field::train::{loss_and_grad, Sampling};
 use unispine::field::{EncoderConfig, Field, FieldConfig};
 use unispine::simd::Simd;
+
+mod common;
 
 #[test]
 fn field_gradcheck_rows_pass() {
@@ -94,7 +94,7 @@ fn gradcheck_points_keep_off_cell_faces() {
 
 #[test]
 fn gradcheck_json_lists_every_row() {
-    let o = Command::new(env!("CARGO_BIN_EXE_unispine"))
+    let o = common::cli::bin()
         .args(["gradcheck", "--stage", "field", "--json"])
         .output()
         .unwrap();
@@ -113,7 +113,7 @@ fn gradcheck_json_lists_every_row() {
         );
     }
     assert!(v["worst"].as_f64().unwrap() < 1e-6);
-    let o = Command::new(env!("CARGO_BIN_EXE_unispine"))
+    let o = common::cli::bin()
         .args(["gradcheck", "--stage", "mlp"])
         .output()
         .unwrap();

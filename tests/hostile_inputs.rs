@@ -4,10 +4,9 @@
 
 use std::io::Write;
 use std::path::Path;
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-const BIN: &str = env!("CARGO_BIN_EXE_unispine");
+mod common;
 
 /// Virtual-memory limit of each run, KiB (1.5 GiB: far below what the hostile claims ask for).
 const MEM_KIB: u64 = 1_536 * 1024;
@@ -16,37 +15,8 @@ const TIMEOUT: Duration = Duration::from_secs(60);
 
 /// Run the binary with `args` under the limits; return (exit code, stderr).
 fn run(args: &[&str]) -> (i32, String) {
-    let mut script = format!("ulimit -v {MEM_KIB}; exec \"$0\"");
-    for k in 1..=args.len() {
-        script += &format!(" \"${{{k}}}\"");
-    }
-    let mut child = Command::new("sh")
-        .arg("-c")
-        .arg(script)
-        .arg(BIN)
-        .args(args)
-        .env("RAYON_NUM_THREADS", "2")
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn sh");
-    let t0 = Instant::now();
-    loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            let mut err = String::new();
-            use std::io::Read;
-            child.stderr.take().unwrap().read_to_string(&mut err).ok();
-            return (status.code().unwrap_or(-1), err);
-        }
-        if t0.elapsed() > TIMEOUT {
-            child.kill().ok();
-            panic!(
-                "`unispine {}` did not finish within {TIMEOUT:?}",
-                args.join(" ")
-            );
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let r = common::cli::run_limited(args, Path::new("."), &[], MEM_KIB / 1024, TIMEOUT.as_secs());
+    (r.code, r.stderr)
 }
 
 /// Assert a clean error exit naming `file` and each of `words`.

@@ -354,7 +354,7 @@ fn spwm_weights_properties() {
     assert!(sig.gate.data.iter().all(|&g| g > 0.0 && g < 1.0));
 }
 
-/// Figures for paper_notes.md (not a timed assertion):
+/// Figures for docs/measurements.md (not a timed assertion):
 /// `cargo test --release --test loss_gradcheck -- --ignored --nocapture timing`
 /// (add `RAYON_NUM_THREADS=1` for one thread).
 #[test]

@@ -16,6 +16,8 @@ use unispine::field::render as fr;
 use unispine::geometry::{ConeBeam, Mode};
 use unispine::image2d::Image2d;
 use unispine::volume::Volume;
+mod common;
+use common::tiny;
 
 // ---------------------------------------------------------------------------------------------
 // Field rays (NAF / SAX-NeRF sampling).
@@ -344,10 +346,6 @@ fn jacobian_clamp_on_all_four_sides() {
 
 // ---------------------------------------------------------------------------------------------
 // Evaluation.
-
-#[path = "common/tiny.rs"]
-#[allow(dead_code)]
-mod tiny;
 
 #[test]
 #[allow(clippy::manual_clamp)] // written differently from the code's f32::clamp on purpose

@@ -751,7 +751,7 @@ fn specs_round_trip_through_json_with_defaults() {
     assert_eq!(back, p);
 }
 
-/// A loose bound only (the figures are measured in paper_notes.md): the default phantom and
+/// A loose bound only (the figures are in docs/measurements.md): the default phantom and
 /// its proxy take well under a second of work in release.
 #[test]
 fn default_phantom_and_proxy_are_fast() {

@@ -4,12 +4,12 @@
 //! written.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
-const BIN: &str = env!("CARGO_BIN_EXE_unispine");
+mod common;
 
 fn data(dir: &Path, out: &str, extra: &[&str]) -> Output {
-    Command::new(BIN)
+    common::cli::bin()
         .args([
             "data",
             "phantom",

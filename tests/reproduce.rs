@@ -3,12 +3,12 @@
 //! plan errors naming the line.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
-const BIN: &str = env!("CARGO_BIN_EXE_unispine");
+mod common;
 
 fn reproduce(args: &[&str], cwd: &Path) -> Output {
-    Command::new(BIN)
+    common::cli::bin()
         .arg("reproduce")
         .args(args)
         .current_dir(cwd)
@@ -269,7 +269,7 @@ fn stopped_cell_resumes(method: &str, model: &str, started: &str) {
         serde_json::from_str(&std::fs::read_to_string(&rec_path).unwrap()).unwrap();
     let args: Vec<String> = serde_json::from_value(rec["args"].clone()).unwrap();
     let ds = dir.join("a/datasets/ph");
-    let o = Command::new(BIN)
+    let o = common::cli::bin()
         .arg("train")
         .arg("--data")
         .arg(&ds)
@@ -309,7 +309,7 @@ fn a_listing_piped_into_a_reader_that_stops_early_ends_quietly() {
     let plan =
         tiny_plan(1, "").replace("seeds = [0, 1]", &format!("seeds = [{}]", seeds.join(", ")));
     std::fs::write(dir.path().join("big.toml"), plan).unwrap();
-    let mut child = Command::new(BIN)
+    let mut child = common::cli::bin()
         .args(["reproduce", "big.toml", "--list"])
         .current_dir(dir.path())
         .stdout(std::process::Stdio::piped())

@@ -9,12 +9,11 @@ use std::process::Command;
 use std::sync::atomic::AtomicBool;
 
 use unispine::train::{self, Checkpoint, Control, Event, Method, RunDir, TrainConfig};
-
-#[path = "common/tiny.rs"]
-mod tiny;
+mod common;
+use common::tiny;
 
 fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_unispine"))
+    common::cli::bin()
 }
 
 fn ok(out: std::process::Output) -> String {

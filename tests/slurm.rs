@@ -3,14 +3,11 @@
 //! bit. Needs a running cluster (`bash scripts/slurm-local.sh start`, which `.ci/run` does);
 //! without one the test says so and passes.
 
-#[path = "common/skip.rs"]
-mod skip;
-
 use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
-
-const BIN: &str = env!("CARGO_BIN_EXE_unispine");
+mod common;
+use common::skip;
 
 fn slurm_up() -> Result<(), String> {
     let o = Command::new("sinfo")
@@ -88,10 +85,10 @@ fn slurm_array_and_collect_job_equal_the_local_run() {
                 data = [\"phantom\", \"--size\", \"32\", \"--detector\", \"32\", \
                 \"--train-views\", \"10\", \"--test-views\", \"4\"]\n";
     std::fs::write(dir.join("plan.toml"), plan).unwrap();
-    run(Command::new(BIN)
+    run(common::cli::bin()
         .args(["reproduce", "plan.toml", "--out", "local"])
         .current_dir(dir));
-    let t = run(Command::new(BIN)
+    let t = run(common::cli::bin()
         .args(["reproduce", "plan.toml", "--out", "cluster", "--emit-slurm"])
         .current_dir(dir));
     assert!(t.contains("submit.sh"), "{t}");

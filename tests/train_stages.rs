@@ -2,14 +2,12 @@
 //! training, the stages sum to the step, densification events are counted and amortised, and
 //! the benchmark runs on a dataset folder and on the phantom fallback.
 
-#[path = "common/cli.rs"]
-mod cli;
-#[path = "common/tiny.rs"]
-mod tiny;
-
 use tiny::{dataset, hidden, tiny};
 use unispine::audit::train_bench::{self, Clock};
 use unispine::train::{Method, StageTimes, Trainer};
+mod common;
+use common::cli;
+use common::tiny;
 
 #[test]
 fn stage_timers_change_no_bit_and_sum_to_the_step() {

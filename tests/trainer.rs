@@ -12,9 +12,9 @@ use unispine::image2d::Image2d;
 use unispine::render::{self, ColorMode};
 use unispine::train::{self, Event, Method, RunDir, TrainConfig, TrainOverrides, Trainer};
 
-#[path = "common/tiny.rs"]
-mod tiny;
 use tiny::{dataset, tiny};
+mod common;
+use common::tiny;
 
 fn quiet(_: &Event) {}
 

@@ -1,9 +1,6 @@
 //! Volume readers, conversions and resampling: round trips on files written here, header errors
 //! that name the file and field, and the real CT / ultrasound volumes when present.
 
-#[path = "common/skip.rs"]
-mod skip;
-
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -978,6 +975,8 @@ fn real_ultrasound_phantom_header() {
 
 use unispine::volume::resample::{self, IndexBox};
 use unispine::volume::LabelMap;
+mod common;
+use common::skip;
 
 fn labelled_grid() -> (Volume<f64>, LabelMap) {
     let dims = [20, 16, 12];

@@ -14,6 +14,12 @@ pub struct Run {
     pub stderr: String,
 }
 
+/// The `unispine` binary built for these tests, as a command to add arguments to (the one
+/// place that names it).
+pub fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_unispine"))
+}
+
 /// Run `unispine ARGS`.
 pub fn run<S: AsRef<OsStr>>(args: &[S]) -> Run {
     run_threads(args, None)
@@ -21,7 +27,7 @@ pub fn run<S: AsRef<OsStr>>(args: &[S]) -> Run {
 
 /// Run `unispine ARGS` with `RAYON_NUM_THREADS` set when `threads` is given.
 pub fn run_threads<S: AsRef<OsStr>>(args: &[S], threads: Option<usize>) -> Run {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_unispine"));
+    let mut c = bin();
     c.args(args);
     if let Some(t) = threads {
         c.env("RAYON_NUM_THREADS", t.to_string());

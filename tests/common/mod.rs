@@ -1,5 +1,8 @@
-//! Helpers shared by the integration tests.
+//! Helpers shared by the integration tests (each test file uses some of them).
+
+#![allow(dead_code)]
 
 pub mod cli;
 pub mod golden;
 pub mod skip;
+pub mod tiny;

@@ -441,7 +441,7 @@ fn projection_of_100k_gaussians_is_fast() {
     let t_bwd = t0.elapsed();
     println!("100k Gaussians f32: forward {t_fwd:?}, backward {t_bwd:?}");
     assert!(s.radius.iter().filter(|&&r| r > 0).count() > 90_000);
-    // Generous bound (shared CI machines); typical figures are in paper_notes.md.
+    // Generous bound (shared CI machines); typical figures are in docs/measurements.md.
     assert!(t_fwd.as_secs_f64() < 0.5 && t_bwd.as_secs_f64() < 0.5);
 }
 
