@@ -149,3 +149,35 @@ fn an_empty_volume_is_an_error_naming_the_setting() {
         .to_string();
     assert!(e.contains("init.kind") && e.contains("fdk"), "{e}");
 }
+
+#[test]
+fn bad_init_settings_exit_1_naming_the_flag_and_value_and_write_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    for (flags, words) in [
+        (vec!["--init", "cube"], vec!["--init", "cube", "unit-cube"]),
+        (vec!["--init-points", "0"], vec!["init.points", "got 0"]),
+        (
+            vec!["--fdk-threshold", "1.5"],
+            vec!["init.fdk_threshold", "got 1.5"],
+        ),
+        (
+            vec!["--grad-threshold=-1"],
+            vec!["densify.grad_threshold", "got -1"],
+        ),
+    ] {
+        let mut args = vec!["train", "--data", "no-such-dataset", "--out"];
+        args.push(out.to_str().unwrap());
+        args.extend(&flags);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_unispine"))
+            .args(&args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{flags:?}: {err}");
+        for w in words {
+            assert!(err.contains(w), "{flags:?}: `{err}` lacks {w}");
+        }
+        assert!(!out.exists(), "{flags:?} wrote {}", out.display());
+    }
+}

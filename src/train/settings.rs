@@ -226,6 +226,8 @@ macro_rules! settings {
 
 settings! {
     "iterations" range(|c| c.iterations as f64, ge_le(1.0, MAX_ITERATIONS as f64));
+    "schedule_iterations"
+        range(|c| c.schedule_iterations as f64, ge_le(1.0, MAX_ITERATIONS as f64));
     "seed" flag(
         /// Seed of the view order, random init and split samples.
         seed: u64 => |c, v| c.seed = v
@@ -412,6 +414,14 @@ impl TrainOverrides {
         Ok(c)
     }
 
+    /// Range-check the flags given on `method`'s preset: what a reproduction plan can check
+    /// before any cell runs (the error names the field, its range and the value).
+    pub fn check_on_preset(&self, method: Method) -> Result<()> {
+        let mut c = TrainConfig::preset(method);
+        self.set_flags(&mut c);
+        check_ranges(&c)
+    }
+
     /// `--compact-keep` and `--compact-to` exclude each other; `--compact-at` and
     /// `--compact-finetune` need a compaction, from a size flag or the config.
     fn check_compact_flags(&self, c: &TrainConfig) -> Result<()> {
@@ -463,6 +473,7 @@ mod tests {
         let mut c = TrainConfig::preset(Method::Unispine);
         c.init.points = 7;
         c.init.fdk_threshold = 0.3;
+        c.schedule_iterations = 30_000;
         c.compact = Some(CompactConfig {
             keep: Some(0.5),
             to: Some(1),
