@@ -31,7 +31,7 @@
 //!   assertion instead);
 //! - each point is the voxel *centre* (where the FDK value was computed);
 //! - intensity, opacity, scale and rotation are those of every other rule
-//!   ([`super::init::gaussians_at`]: `init.intensity`, `init.opacity`, 3-NN scale, identity):
+//!   (`init::gaussians_at`: `init.intensity`, `init.opacity`, 3-NN scale, identity):
 //!   R2-Gaussian's per-point density belongs to its additive (integration) renderer and has no
 //!   counterpart in our alpha-blended Gaussians, whose renders are compared with per-view
 //!   normalised images; so the `fdk` rule differs from `acui` / `random` / `unit-cube` only in
@@ -43,16 +43,17 @@
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::init::InitConfig;
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::geometry::Camera;
 
-/// The `fdk` initial points of a run on `ds` that trains on its first `n_views` training views.
+/// The `fdk` initial points of a run on `ds` that trains on its first `n_views` training views:
+/// at most `points` voxel centres above `threshold` times the FDK maximum.
 pub fn fdk_positions(
     ds: &Dataset,
     n_views: usize,
-    cfg: &InitConfig,
+    threshold: f64,
+    points: usize,
     seed: u64,
 ) -> Result<Vec<[f64; 3]>> {
     let geo = &ds.geometry;
@@ -65,8 +66,8 @@ pub fn fdk_positions(
     }
     let cams: Vec<Camera> = (0..nv).map(|k| ds.train_camera(k)).collect();
     let vol = crate::fdk::reconstruct_with_cameras(geo, &cams, &ds.train.projections[..nv])?;
-    let idx = dense_voxels(&vol.data, cfg.fdk_threshold)?;
-    let chosen = draw(idx, cfg.points, seed);
+    let idx = dense_voxels(&vol.data, threshold)?;
+    let chosen = draw(idx, points, seed);
     let [nx, ny, _] = geo.n_voxel;
     Ok(chosen
         .into_iter()
@@ -88,7 +89,7 @@ pub fn dense_voxels(data: &[f32], threshold: f64) -> Result<Vec<usize>> {
         .iter()
         .filter(|v| v.is_finite())
         .fold(f64::NEG_INFINITY, |m, &v| m.max(v as f64));
-    if !(max > 0.0) {
+    if max <= 0.0 {
         return Err(Error::invalid(
             "init.kind (--init fdk)",
             format!(

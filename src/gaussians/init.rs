@@ -382,7 +382,9 @@ pub fn positions(
         InitKind::Acui => acui_positions(geo, cfg.interval)?,
         InitKind::Random => random_positions(geo, acui_positions(geo, cfg.interval)?.len(), seed),
         InitKind::UnitCube => unit_cube_positions(cfg.points, seed),
-        InitKind::Fdk => super::fdk_init::fdk_positions(ds, n_views, cfg, seed)?,
+        InitKind::Fdk => {
+            super::fdk_init::fdk_positions(ds, n_views, cfg.fdk_threshold, cfg.points, seed)?
+        }
     };
     check_some_point_inside(geo, cfg.kind, &pts)?;
     Ok(pts)
@@ -534,14 +536,14 @@ mod tests {
         let g = gaussians_at::<f64>(&p, &cfg, ColorMode::Sh).unwrap();
         let want = brute(&p);
         assert_eq!(g.len(), 700);
-        for i in 0..700 {
+        for (i, q) in p.iter().enumerate() {
             let s = want[i].max(1e-7).sqrt();
             for a in 0..3 {
                 assert!((g.log_scales[i][a].exp() - s).abs() <= 1e-12 * s, "{i}");
             }
             assert!((crate::math::activations::sigmoid(g.opacity_logits[i]) - 0.1).abs() < 1e-12);
             assert_eq!(g.quats[i], [1.0, 0.0, 0.0, 0.0]);
-            assert_eq!(g.means[i], p[i]);
+            assert_eq!(g.means[i], *q);
         }
         // The cube sits at the world origin (the isocentre), whatever offOrigin: a box moved
         // away from it holds none of the points, which is an error naming the setting.
