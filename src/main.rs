@@ -26,7 +26,16 @@ fn main() {
         libc::mallopt(libc::M_MMAP_THRESHOLD, 64 << 20);
         libc::mallopt(libc::M_TRIM_THRESHOLD, 256 << 20);
     }
-    let cli = cli::Cli::parse();
+    // A usage error (unknown flag, a value that does not parse, such as `--init cube`) names
+    // the flag and the value and exits 1 like every other error; help and version exit 0.
+    let cli = match cli::Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) if e.use_stderr() => {
+            let _ = e.print();
+            std::process::exit(1);
+        }
+        Err(e) => e.exit(),
+    };
     if let Err(e) = cli::run(cli) {
         eprintln!("error: {e:#}");
         std::process::exit(1);

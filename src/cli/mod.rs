@@ -36,8 +36,8 @@ pub enum Command {
     Render(render::RenderArgs),
     /// Check every analytic gradient against central finite differences (f64) and print a table.
     Gradcheck(gradcheck::GradcheckArgs),
-    /// Train a model (methods: unispine, xgaussian, 3dgs, spwm-only, and the baselines fdk,
-    /// naf, intratomo, tensorf, nerf[-full]).
+    /// Train a model (methods: unispine, xgaussian, 3dgs, spwm-only, 3dgs-vanilla, and the
+    /// baselines fdk, naf, intratomo, tensorf, nerf[-full]).
     Train(Box<train::TrainArgs>),
     /// Re-evaluate a saved run on its test views.
     Eval(eval::EvalArgs),

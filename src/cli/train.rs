@@ -22,8 +22,9 @@ pub struct TrainArgs {
     /// Dataset folder written by `unispine data` (with `--resume`: default the run's own).
     #[arg(long, required_unless_present = "resume")]
     pub data: Option<PathBuf>,
-    /// Method: a Gaussian preset (unispine, xgaussian, 3dgs, spwm-only) or a baseline (fdk,
-    /// naf, intratomo, tensorf, nerf, naf-full, intratomo-full, tensorf-full, nerf-full).
+    /// Method: a Gaussian preset (unispine, xgaussian, 3dgs, spwm-only, 3dgs-vanilla) or a
+    /// baseline (fdk, naf, intratomo, tensorf, nerf, naf-full, intratomo-full, tensorf-full,
+    /// nerf-full).
     #[arg(long, default_value = "unispine", value_parser = MethodParser)]
     pub method: TrainMethod,
     /// Training iterations (paper: 20000).

@@ -9,15 +9,23 @@
 //! struct, the code that applies the flags and the validation are generated from that row.
 //!
 //! Defaults are the UniSpine-GS values (repository orangeisland66/UniSpine-GS, files
-//! `config/example.yaml` and `arguments/__init__.py`); every preset shares them and differs only
-//! in the intensity model, the initialisation and the loss:
+//! `config/example.yaml` and `arguments/__init__.py`); every preset but `3dgs-vanilla` shares
+//! them and differs only in the intensity model, the initialisation and the loss:
 //!
-//! | preset | intensity | init | loss |
-//! |---|---|---|---|
-//! | `3dgs` | view-dependent SH colour | random in the box | (1 - 0.2) L1 + 0.2 D-SSIM |
-//! | `xgaussian` | RIRF | ACUI | (1 - 0.2) L1 + 0.2 D-SSIM |
-//! | `unispine` | RIRF | ACUI | (1 - 0.2) SPWM-weighted Charbonnier + 0.2 D-SSIM (Eqs. 6-9) |
-//! | `spwm-only` | view-dependent SH colour | random in the box | as `unispine` |
+//! | preset | intensity | init | loss | schedule, densify threshold |
+//! |---|---|---|---|---|
+//! | `3dgs` | view-dependent SH colour | random in the box | (1 - 0.2) L1 + 0.2 D-SSIM | UniSpine-GS, 1.5e-4 |
+//! | `xgaussian` | RIRF | ACUI | (1 - 0.2) L1 + 0.2 D-SSIM | UniSpine-GS, 1.5e-4 |
+//! | `unispine` | RIRF | ACUI | (1 - 0.2) SPWM-weighted Charbonnier + 0.2 D-SSIM (Eqs. 6-9) | UniSpine-GS, 1.5e-4 |
+//! | `spwm-only` | view-dependent SH colour | random in the box | as `unispine` | UniSpine-GS, 1.5e-4 |
+//! | `3dgs-vanilla` | view-dependent SH colour | unit cube | (1 - 0.2) L1 + 0.2 D-SSIM | 3DGS's 30,000 iterations, 2e-4 (table and sources at `fn vanilla_3dgs` below) |
+//!
+//! The densification threshold (`densify.grad_threshold`, `--grad-threshold`, a plan key
+//! `grad_threshold = ...` per variant) on the mean NDC gradient norm, in each upstream config:
+//! graphdeco-inria/gaussian-splatting `arguments/__init__.py` 2e-4; caiyuanhao1998/X-Gaussian
+//! `arguments/__init__.py` 2e-4 (its default) and 2.6e-5 in its medical configs (`config/
+//! chest.yaml`, `pelvis.yaml`, ...); orangeisland66/UniSpine-GS `config/example.yaml` 1.5e-4
+//! (the value used, our default) and 4e-5 as its `arguments/__init__.py` default.
 //!
 //! RIRF variant: X-Gaussian's code form `max(0, 0.5 + lambda . f)` (`rirf-xgaussian`) is the
 //! training default. It is what the code that introduced the RIRF trains with, and the
@@ -33,7 +41,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::densify::DensifyConfig;
 use crate::error::{Error, Result};
-use crate::gaussians::init::{InitConfig, InitKind};
+use crate::gaussians::init::{InitConfig, InitKind, DEFAULT_FDK_THRESHOLD, DEFAULT_INIT_POINTS};
 use crate::loss::spwm::SpwmConfig;
 use crate::loss::{DataTerm, LossConfig};
 use crate::optim::schedule::ExponLr;
@@ -57,6 +65,11 @@ pub enum Method {
     Unispine,
     /// SPWM + weighted Charbonnier without RIRF (SH colour) and without ACUI (random init).
     SpwmOnly,
+    /// Vanilla 3D Gaussian splatting as shipped: its 30,000-iteration defaults, SH colour, the
+    /// unit-cube init, L1 + D-SSIM.
+    #[value(name = "3dgs-vanilla")]
+    #[serde(rename = "3dgs-vanilla")]
+    Gs3dVanilla,
 }
 
 impl Method {
@@ -67,6 +80,7 @@ impl Method {
             Method::Xgaussian => "xgaussian",
             Method::Unispine => "unispine",
             Method::SpwmOnly => "spwm-only",
+            Method::Gs3dVanilla => "3dgs-vanilla",
         }
     }
 }
@@ -147,6 +161,15 @@ pub struct TrainConfig {
     pub data: Option<String>,
     /// Training iterations (20000).
     pub iterations: usize,
+    /// The iteration count the iteration-based schedules are written for (20000; 30000 for
+    /// `3dgs-vanilla`): [`TrainConfig::compress_schedule`] scales them by `iterations /
+    /// schedule_iterations`. Left out of the JSON at 20000, so configs written before the
+    /// setting existed keep their fingerprint.
+    #[serde(
+        default = "paper_iterations",
+        skip_serializing_if = "is_paper_iterations"
+    )]
+    pub schedule_iterations: usize,
     /// Seed of the view order, the random init and the split samples.
     pub seed: u64,
     /// Intensity model.
@@ -192,11 +215,28 @@ fn one() -> f64 {
     1.0
 }
 
+fn paper_iterations() -> usize {
+    PAPER_ITERATIONS
+}
+
+fn is_paper_iterations(n: &usize) -> bool {
+    *n == PAPER_ITERATIONS
+}
+
+/// Vanilla 3D Gaussian splatting's iteration count (graphdeco-inria/gaussian-splatting
+/// `arguments/__init__.py` `OptimizationParams.iterations`).
+pub const VANILLA_ITERATIONS: usize = 30_000;
+
 impl TrainConfig {
-    /// The preset of `method` with the paper schedule.
+    /// The preset of `method` with its schedule (the paper's; 3DGS's for `3dgs-vanilla`).
     pub fn preset(method: Method) -> Self {
+        if method == Method::Gs3dVanilla {
+            return Self::vanilla_3dgs();
+        }
         let (color, kind, data_term, spwm) = match method {
-            Method::Gs3d => (ColorMode::Sh, InitKind::Random, DataTerm::L1, None),
+            Method::Gs3d | Method::Gs3dVanilla => {
+                (ColorMode::Sh, InitKind::Random, DataTerm::L1, None)
+            }
             Method::Xgaussian => (ColorMode::RirfXgaussian, InitKind::Acui, DataTerm::L1, None),
             Method::Unispine => (
                 ColorMode::RirfXgaussian,
@@ -215,6 +255,7 @@ impl TrainConfig {
             method,
             data: None,
             iterations: PAPER_ITERATIONS,
+            schedule_iterations: PAPER_ITERATIONS,
             seed: 0,
             color,
             init: InitConfig {
@@ -222,6 +263,8 @@ impl TrainConfig {
                 interval: 8,
                 opacity: 0.1,
                 intensity: 0.5,
+                points: DEFAULT_INIT_POINTS,
+                fdk_threshold: DEFAULT_FDK_THRESHOLD,
             },
             lr: LrConfig::default(),
             adam: AdamConfig::default(),
@@ -245,14 +288,74 @@ impl TrainConfig {
         }
     }
 
+    /// `3dgs-vanilla`: graphdeco-inria/gaussian-splatting's defaults as shipped (file
+    /// `arguments/__init__.py`, `OptimizationParams`, read at commit `82bc469`; `train.py` and
+    /// `scene/gaussian_model.py` where named):
+    ///
+    /// | setting | value | upstream |
+    /// |---|---|---|
+    /// | iterations | 30,000 | `iterations = 30_000` |
+    /// | position lr | 1.6e-4 -> 1.6e-6 x extent over 30,000 | `position_lr_init`, `_final`, `_max_steps` |
+    /// | position lr delay mult | 0.01 (no effect, no delay steps) | `position_lr_delay_mult` |
+    /// | feature lr (`f_dc`; `f_rest` / 20) | 0.0025 | `feature_lr`; `/ 20.0` in `gaussian_model.py` |
+    /// | opacity lr | 0.05 | `opacity_lr` (0.025 in later versions of the file) |
+    /// | scaling lr | 0.005 | `scaling_lr` |
+    /// | rotation lr | 0.001 | `rotation_lr` |
+    /// | percent dense | 0.01 | `percent_dense` |
+    /// | lambda D-SSIM | 0.2 | `lambda_dssim` |
+    /// | densify from / until / every | 500 / 15,000 / 100 | `densify_from_iter`, `densify_until_iter`, `densification_interval` |
+    /// | densify gradient threshold | 2e-4 | `densify_grad_threshold` |
+    /// | opacity reset | every 3,000 | `opacity_reset_interval` |
+    /// | SH degree step | every 1,000 | `train.py`: `oneupSHdegree` at `iteration % 1000 == 0` |
+    /// | test iterations | 7,000, 30,000 | `train.py` `--test_iterations` default |
+    ///
+    /// Colour: view-dependent SH (vanilla 3DGS has no other). Init: `unit-cube`, the one point
+    /// cloud vanilla 3DGS makes without structure-from-motion points (its `scene/
+    /// dataset_readers.py` `readNerfSyntheticInfo`: 100,000 points in [-1.3, 1.3)^3), which
+    /// X-ray views cannot give (the scanner's cameras need no SfM, and SfM finds no points in
+    /// transmission images); it is also the upstream X-Gaussian / UniSpine-GS code's only
+    /// non-ACUI initialiser. Everything else (Adam, pruning, opacity reset value, split,
+    /// background, evaluation) is shared with every preset and is 3DGS's already.
+    fn vanilla_3dgs() -> Self {
+        let mut c = Self::preset(Method::Gs3d);
+        c.method = Method::Gs3dVanilla;
+        c.init.kind = InitKind::UnitCube;
+        c.iterations = VANILLA_ITERATIONS;
+        c.schedule_iterations = VANILLA_ITERATIONS;
+        c.lr = LrConfig {
+            position_init: 1.6e-4,
+            position_final: 1.6e-6,
+            position_delay_mult: 0.01,
+            position_delay_steps: 0,
+            position_max_steps: 30_000,
+            feature: 0.0025,
+            feature_rest_div: 20.0,
+            opacity: 0.05,
+            scaling: 0.005,
+            rotation: 0.001,
+        };
+        let d = &mut c.densify;
+        d.from_iter = 500;
+        d.until_iter = 15_000;
+        d.interval = 100;
+        d.grad_threshold = 2e-4;
+        d.percent_dense = 0.01;
+        d.opacity_reset_interval = 3000;
+        c.feature_step_interval = 1000;
+        c.loss.lambda_dssim = 0.2;
+        c.eval_iterations = vec![7000, 30_000];
+        c
+    }
+
     /// Scale every iteration-based schedule (position lr, densification, opacity reset, feature
-    /// steps, SPWM warm-up, evaluation points) from the paper's 20000 iterations to
-    /// `self.iterations`, for short runs that still go through every phase. Scales the paper
-    /// schedule: [`super::TrainOverrides::apply`] refuses a config already compressed
-    /// (`schedule_compressed`).
+    /// steps, SPWM warm-up, evaluation points) from the `schedule_iterations` it is written for
+    /// (the paper's 20000, or 30000 for `3dgs-vanilla`) to `self.iterations`, for short runs
+    /// that still go through every phase. [`super::TrainOverrides::apply`] refuses a config
+    /// already compressed (`schedule_compressed`).
     pub fn compress_schedule(&mut self) {
         self.schedule_compressed = true;
-        let f = self.iterations as f64 / PAPER_ITERATIONS as f64;
+        let f = self.iterations as f64 / self.schedule_iterations.max(1) as f64;
+        self.schedule_iterations = self.iterations;
         let s = |x: usize| ((x as f64 * f).round() as usize).max(1);
         let d = &mut self.densify;
         d.from_iter = s(d.from_iter);
@@ -393,6 +496,79 @@ mod tests {
             .map(|&i| c.active_features(i))
             .collect();
         assert_eq!(got, vec![1, 1, 4, 4, 9, 16, 16]);
+    }
+
+    #[test]
+    fn vanilla_3dgs_is_graphdeco_defaults_as_shipped() {
+        // graphdeco-inria/gaussian-splatting, arguments/__init__.py (OptimizationParams):
+        //   iterations = 30_000, position_lr_init = 0.00016, position_lr_final = 0.0000016,
+        //   position_lr_delay_mult = 0.01, position_lr_max_steps = 30_000, feature_lr = 0.0025,
+        //   opacity_lr = 0.05, scaling_lr = 0.005, rotation_lr = 0.001, percent_dense = 0.01,
+        //   lambda_dssim = 0.2, densification_interval = 100, opacity_reset_interval = 3000,
+        //   densify_from_iter = 500, densify_until_iter = 15_000,
+        //   densify_grad_threshold = 0.0002;
+        // train.py: oneupSHdegree every 1000, --test_iterations 7_000 30_000;
+        // gaussian_model.py: f_rest lr = feature_lr / 20.0.
+        let c = TrainConfig::preset(Method::Gs3dVanilla);
+        assert!(c.validate().is_ok());
+        assert_eq!(c.method.name(), "3dgs-vanilla");
+        assert_eq!(c.iterations, 30000);
+        assert_eq!(c.schedule_iterations, 30000);
+        assert_eq!(c.lr.position_init, 0.00016);
+        assert_eq!(c.lr.position_final, 0.0000016);
+        assert_eq!(c.lr.position_delay_mult, 0.01);
+        assert_eq!(c.lr.position_delay_steps, 0);
+        assert_eq!(c.lr.position_max_steps, 30000);
+        assert_eq!(c.lr.feature, 0.0025);
+        assert_eq!(c.lr.feature_rest_div, 20.0);
+        assert_eq!(c.lr.opacity, 0.05);
+        assert_eq!(c.lr.scaling, 0.005);
+        assert_eq!(c.lr.rotation, 0.001);
+        assert_eq!(c.densify.percent_dense, 0.01);
+        assert_eq!(c.loss.lambda_dssim, 0.2);
+        assert_eq!(c.densify.interval, 100);
+        assert_eq!(c.densify.opacity_reset_interval, 3000);
+        assert_eq!(c.densify.from_iter, 500);
+        assert_eq!(c.densify.until_iter, 15000);
+        assert_eq!(c.densify.grad_threshold, 0.0002);
+        assert_eq!(c.feature_step_interval, 1000);
+        assert_eq!(c.eval_iterations, vec![7000, 30000]);
+        assert_eq!(c.color, ColorMode::Sh);
+        assert_eq!(c.init.kind, InitKind::UnitCube);
+        assert_eq!(c.init.points, 100_000);
+        assert_eq!(c.loss.data_term, DataTerm::L1);
+        assert!(c.spwm.is_none());
+        // Round trip through config.json, with the schedule length kept.
+        let back: TrainConfig = serde_json::from_str(&serde_json::to_string(&c).unwrap()).unwrap();
+        assert_eq!(back, c);
+    }
+
+    #[test]
+    fn compression_scales_each_preset_from_its_own_schedule() {
+        // The same fraction of the run for a 20000- and a 30000-iteration preset.
+        let mut u = TrainConfig::preset(Method::Unispine);
+        u.iterations = 2000;
+        u.compress_schedule();
+        let mut v = TrainConfig::preset(Method::Gs3dVanilla);
+        v.iterations = 3000;
+        v.compress_schedule();
+        // 3DGS: densify 500..15000 every 100, reset 3000, SH step 1000, eval 7000, 30000 -> / 10.
+        assert_eq!(v.densify.from_iter, 50);
+        assert_eq!(v.densify.until_iter, 1500);
+        assert_eq!(v.densify.interval, 10);
+        assert_eq!(v.densify.opacity_reset_interval, 300);
+        assert_eq!(v.feature_step_interval, 100);
+        assert_eq!(v.lr.position_max_steps, 3000);
+        assert_eq!(v.eval_points(), vec![700, 3000]);
+        assert!((v.spwm_time_scale - 10.0).abs() < 1e-12);
+        assert_eq!(v.schedule_iterations, 3000);
+        assert_eq!(u.feature_step_interval, v.feature_step_interval);
+        // A 20000-iteration preset written before the field existed reads as 20000.
+        let mut j = serde_json::to_value(TrainConfig::preset(Method::Gs3d)).unwrap();
+        assert!(j.get("schedule_iterations").is_none());
+        j.as_object_mut().unwrap().remove("schedule_iterations");
+        let old: TrainConfig = serde_json::from_value(j).unwrap();
+        assert_eq!(old.schedule_iterations, PAPER_ITERATIONS);
     }
 
     #[test]

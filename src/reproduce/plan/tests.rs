@@ -70,6 +70,39 @@ fn errors_name_the_line_and_key() {
 }
 
 #[test]
+fn variants_set_the_initialiser_and_the_densification_threshold() {
+    let with = |line: &str| OK.replace("color = \"rirf-paper\"", line);
+    let p = parse(&with("grad_threshold = 2.6e-5\ninit = \"unit-cube\"")).unwrap();
+    assert_eq!(
+        p.methods[1].args,
+        vec!["--grad-threshold", "0.000026", "--init", "unit-cube"]
+    );
+    let p = parse(&with("init = \"fdk\"\nfdk_threshold = 0.2")).unwrap();
+    assert_eq!(
+        p.methods[1].args,
+        vec!["--fdk-threshold", "0.2", "--init", "fdk"]
+    );
+    // Bad values: the key's line, the flag or field, the value.
+    for (line, words) in [
+        ("init = \"cube\"", ["line 8", "--init", "cube"]),
+        (
+            "grad_threshold = -1.0",
+            ["line 8", "densify.grad_threshold", "-1"],
+        ),
+        ("init_points = 0", ["line 8", "init.points", "got 0"]),
+        (
+            "lambda_dssim = 2.0",
+            ["line 8", "loss.lambda_dssim", "got 2"],
+        ),
+    ] {
+        let e = parse(&with(line)).unwrap_err().to_string();
+        for w in words {
+            assert!(e.contains(w), "`{line}`: {e} lacks {w}");
+        }
+    }
+}
+
+#[test]
 fn every_builtin_plan_parses() {
     let schema = TrainSchema::of_train();
     for (name, text) in BUILTIN {

@@ -102,8 +102,13 @@ pub(super) fn flags_to_args(
         };
         if *takes_value {
             let val = value_arg(v.get_ref()).map_err(&at)?;
-            args.push(format!("--{flag}"));
-            args.push(val);
+            if val.starts_with('-') {
+                // A negative number as its own argument would parse as a flag.
+                args.push(format!("--{flag}={val}"));
+            } else {
+                args.push(format!("--{flag}"));
+                args.push(val);
+            }
         } else {
             match v.get_ref() {
                 toml::Value::Boolean(true) => args.push(format!("--{flag}")),
@@ -122,18 +127,19 @@ fn train_command() -> clap::Command {
 }
 
 /// Check the variant `args` of method `base` with the parser of `unispine train`'s settings
-/// ([`TrainOverrides`], [`BaselineFlags`]); a message on failure.
+/// ([`TrainOverrides`], [`BaselineFlags`]) and, for a Gaussian preset, the allowed range of
+/// every value on that preset ([`TrainOverrides::check_on_preset`]); a message on failure.
 pub(super) fn check_train_args(base: &str, args: &[String]) -> std::result::Result<(), String> {
     use clap::FromArgMatches;
-    TrainMethod::parse(base)?;
+    let method = TrainMethod::parse(base)?;
     let argv = std::iter::once("train".to_string()).chain(args.iter().cloned());
-    train_command()
+    let overrides = train_command()
         .try_get_matches_from(argv)
         .and_then(|m| {
-            TrainOverrides::from_arg_matches(&m)?;
-            BaselineFlags::from_arg_matches(&m)
+            let o = TrainOverrides::from_arg_matches(&m)?;
+            BaselineFlags::from_arg_matches(&m)?;
+            Ok(o)
         })
-        .map(|_| ())
         .map_err(|e| {
             let s = e.to_string();
             s.lines()
@@ -141,5 +147,9 @@ pub(super) fn check_train_args(base: &str, args: &[String]) -> std::result::Resu
                 .unwrap_or(&s)
                 .trim_start_matches("error: ")
                 .to_string()
-        })
+        })?;
+    if let Some(m) = method.gaussians() {
+        overrides.check_on_preset(m).map_err(|e| e.to_string())?;
+    }
+    Ok(())
 }
