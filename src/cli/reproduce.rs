@@ -155,7 +155,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
                 eprintln!("dataset {name}: skipped (optional): {reason}");
             }
         };
-        for d in &plan.datasets {
+        for d in &plan.dataset_builds() {
             run::prepare_dataset(d, &opts, &mut on_event)?;
         }
         let submit = unispine::reproduce::slurm::write_scripts(
@@ -291,7 +291,13 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
                 .join(", ")
         );
     }
-    let charts = unispine::report::reproduce::write_report(&rows, &out, &md, plan.floor_db)?;
+    let charts = unispine::report::reproduce::write_report(
+        &rows,
+        &out,
+        &md,
+        plan.floor_db,
+        unispine::report::holds::charts(&plan, &rows),
+    )?;
     println!(
         "\nreport: {}\ntables: {}\nresults: {}, {}\ncharts: {}",
         out.join("report.html").display(),
