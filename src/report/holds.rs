@@ -137,3 +137,68 @@ pub fn charts(plan: &Plan, rows: &[Row]) -> Vec<(String, String, String)> {
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::report::reproduce::tests::assert_well_formed;
+    use crate::reproduce::holds::tests::{plan, rows};
+    use crate::reproduce::magnitude::Scoped;
+    use crate::reproduce::verdict::{evaluate, Claim, Measure, Obs};
+
+    #[test]
+    fn one_chart_per_claim_one_panel_per_axis_well_formed() {
+        let cs = charts(&plan(), &rows());
+        // Claims with both methods in the plan: RIRF + ACUI over 3DGS only.
+        assert_eq!(cs.len(), 1);
+        let (name, title, svg) = &cs[0];
+        assert_eq!(name, "holds-1.svg");
+        assert!(title.contains("RIRF + ACUI beat 3DGS"));
+        assert_well_formed(svg);
+        // Two panels (pose-noise numeric on x, init categorical with labelled points).
+        assert!(svg.contains(">pose-noise</text>") && svg.contains(">init</text>"));
+        assert!(svg.contains("0 = default, 1 = acui"));
+        // A band per panel and a dot per pair (pose-noise: 3 values x 3 pairs; init: 2 x 3).
+        assert_eq!(svg.matches("class=\"band\"").count(), 2);
+        assert_eq!(svg.matches("r=\"2.5\" fill=\"none\"").count(), 9 + 6);
+    }
+
+    #[test]
+    fn text_in_the_chart_is_escaped() {
+        let evil = "<script>alert('x')</script>\"&";
+        let claim = Claim {
+            text: evil.into(),
+            a: "a".into(),
+            b: "b".into(),
+            measure: Measure::PsnrGain,
+            dataset: None,
+        };
+        let obs: Vec<Obs> = (0..3)
+            .flat_map(|s| {
+                [("a", 31.0 + s as f64), ("b", 30.0)].map(|(m, p)| Obs {
+                    key: format!("d/{s}/"),
+                    paper_dataset: None,
+                    method: m.into(),
+                    psnr: p,
+                    train_time_s: 1.0,
+                    fps: 1.0,
+                })
+            })
+            .collect();
+        let h: Vec<Holds> = [evil, "v2"]
+            .iter()
+            .enumerate()
+            .map(|(i, v)| Holds {
+                claim: claim.clone(),
+                axis: evil.into(),
+                value: v.to_string(),
+                is_base: i == 0,
+                scopes: vec![Scoped::new("pooled", evaluate(&claim, &obs), Some(2.0))],
+            })
+            .collect();
+        let svg = figure(&[panel(evil, &h.iter().collect::<Vec<_>>())]);
+        assert_well_formed(&svg);
+        assert!(!svg.contains("<script"));
+        assert!(svg.contains("&lt;script&gt;alert(&#39;x&#39;)&lt;/script&gt;&quot;&amp;"));
+    }
+}

@@ -559,7 +559,7 @@ pub fn write_report(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     #[test]
@@ -579,7 +579,7 @@ mod tests {
 
     /// Check that `doc` is well-formed markup: tags nest, every `&` starts an entity, no `<`
     /// inside text or an attribute value; and that no element is named `script`.
-    fn assert_well_formed(doc: &str) {
+    pub(crate) fn assert_well_formed(doc: &str) {
         let mut stack: Vec<String> = Vec::new();
         let b = doc.as_bytes();
         let mut i = 0;
