@@ -19,6 +19,7 @@
 
 pub mod aggregate;
 pub mod cell;
+pub mod claims_doc;
 pub mod compactness;
 pub mod holds;
 pub mod magnitude;
