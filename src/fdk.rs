@@ -36,7 +36,7 @@
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::geometry::{ConeBeam, Mode};
+use crate::geometry::{Camera, ConeBeam, Mode};
 use crate::image2d::Image2d;
 use crate::volume::{Provenance, Volume};
 
@@ -109,8 +109,20 @@ pub fn weight_and_filter(geo: &ConeBeam, proj: &Image2d<f32>, n_views: usize) ->
 /// Step 4: voxel-driven backprojection of filtered projections (one per angle) onto the
 /// geometry's voxel grid, weighted by `1 / U^2`.
 pub fn backproject(geo: &ConeBeam, angles: &[f64], filtered: &[Image2d<f64>]) -> Volume<f32> {
+    let cams: Vec<Camera> = angles.iter().map(|&a| geo.camera(a)).collect();
+    backproject_cameras(geo, &cams, filtered)
+}
+
+/// [`backproject`] with one camera per filtered projection (each voxel centre projected with
+/// its view's camera, `U` its depth along that camera's axis over DSO). With the cameras of
+/// the orbit's angles it is [`backproject`], bit for bit; with perturbed cameras it is the
+/// usual approximate FDK of a near-circular scan.
+pub fn backproject_cameras(
+    geo: &ConeBeam,
+    cams: &[Camera],
+    filtered: &[Image2d<f64>],
+) -> Volume<f32> {
     let [nx, ny, nz] = geo.n_voxel;
-    let cams: Vec<_> = angles.iter().map(|&a| geo.camera(a)).collect();
     let mut vol = Volume::<f32>::zeros(geo.n_voxel, geo.d_voxel);
     vol.offset = geo.off_origin;
     let centre = |ijk: [f64; 3]| {
@@ -168,26 +180,39 @@ pub fn reconstruct(
     projections: &[Image2d<f32>],
 ) -> Result<Volume<f32>> {
     geo.validate()?;
+    crate::error::check_finite("angles", angles)?;
+    let cams: Vec<Camera> = angles.iter().map(|&a| geo.camera(a)).collect();
+    reconstruct_with_cameras(geo, &cams, projections)
+}
+
+/// [`reconstruct`] with the camera of each projection given (for instance the recorded,
+/// perturbed cameras of a pose-noisy dataset): the filtering of a circular scan, then
+/// [`backproject_cameras`]. With `geo.camera(angle)` of each angle it is [`reconstruct`].
+pub fn reconstruct_with_cameras(
+    geo: &ConeBeam,
+    cams: &[Camera],
+    projections: &[Image2d<f32>],
+) -> Result<Volume<f32>> {
+    geo.validate()?;
     if geo.mode != Mode::Cone {
         return Err(Error::invalid(
             "mode",
             "FDK needs a cone-beam geometry (got parallel)",
         ));
     }
-    if angles.is_empty() {
+    if cams.is_empty() {
         return Err(Error::invalid("angles", "FDK needs at least one view"));
     }
-    if angles.len() != projections.len() {
+    if cams.len() != projections.len() {
         return Err(Error::invalid(
             "projections",
             format!(
                 "{} angles but {} projections",
-                angles.len(),
+                cams.len(),
                 projections.len()
             ),
         ));
     }
-    crate::error::check_finite("angles", angles)?;
     let (w, h) = geo.image_size();
     for (k, p) in projections.iter().enumerate() {
         if p.width != w || p.height != h || p.data.len() != w * h {
@@ -203,15 +228,15 @@ pub fn reconstruct(
     }
     let filtered: Vec<Image2d<f64>> = projections
         .iter()
-        .map(|p| weight_and_filter(geo, p, angles.len()))
+        .map(|p| weight_and_filter(geo, p, cams.len()))
         .collect();
-    let mut vol = backproject(geo, angles, &filtered);
+    let mut vol = backproject_cameras(geo, cams, &filtered);
     vol.provenance = Provenance {
         source: "fdk".into(),
         file_affine: None,
         steps: vec![format!(
             "FDK (TIGRE semantics: cosine weights, Ram-Lak, 1/U^2, no Parker) from {} views",
-            angles.len()
+            cams.len()
         )],
     };
     Ok(vol)

@@ -1,5 +1,10 @@
-//! Initialisation: ACUI (X-Gaussian's angle-pose cuboid uniform initialisation) and, for the
-//! 3DGS baseline, the same number of points uniformly at random in the same box.
+//! Initialisation: where the first Gaussians are placed. Four rules ([`InitKind`]):
+//! `acui` (X-Gaussian's angle-pose cuboid uniform initialisation), `random` (the `3dgs`
+//! preset: as many points as ACUI, uniform in the volume box), `unit-cube` (the upstream
+//! non-ACUI branch, see below) and `fdk` (points where an FDK reconstruction of the training
+//! views is dense, as R2-Gaussian does; [`super::fdk_init`]). Every rule then gives each point
+//! the same Gaussian ([`gaussians_at`]): isotropic 3-NN scale, identity rotation, opacity
+//! `init.opacity`, intensity `init.intensity`.
 //!
 //! ACUI (X-Gaussian / UniSpine-GS `scene/dataset_readers.py`, `gaussian_model.py`
 //! `create_from_pcd`):
@@ -23,11 +28,22 @@
 //! Random init (3DGS baseline): the same number of points, uniform in the full volume box
 //! `[-sVoxel/2, sVoxel/2] + offOrigin`, from `ChaCha8Rng` seeded with the run seed; everything
 //! else as ACUI.
+//!
+//! Unit-cube init: the branch X-Gaussian / UniSpine-GS `scene/dataset_readers.py` take when
+//! `cube_pcd_init` is off, itself 3D Gaussian splatting's rule for scenes without SfM points
+//! (graphdeco-inria/gaussian-splatting `scene/dataset_readers.py`, `readNerfSyntheticInfo`):
+//! `init.points` (upstream 100,000) points uniform in `[-1.3, 1.3)^3` in scene units. The
+//! upstream X-ray scene is in millimetres (its `ConeGeometry` keeps TIGRE's mm with scale 1),
+//! and so is ours, so the cube is 2.6 mm wide at the world origin (the isocentre: upstream does
+//! not shift it, and neither do we, whatever `offOrigin`). Scale, rotation and opacity as ACUI
+//! (upstream `create_from_pcd` treats both point clouds alike); `ChaCha8Rng` seeded with the
+//! run seed. A cube with no point inside the volume box is an error naming the setting.
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
+use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::gaussians::model::N_FEATURES;
 use crate::gaussians::rirf::ColorMode;
@@ -48,6 +64,47 @@ pub enum InitKind {
     Acui,
     /// Uniform random points in the volume box, as many as ACUI would give (3DGS baseline).
     Random,
+    /// `init.points` uniform points in [-1.3, 1.3)^3 mm about the isocentre (the upstream
+    /// non-ACUI branch, 3DGS's rule without SfM points).
+    UnitCube,
+    /// `init.points` voxel centres where an FDK reconstruction of the training views exceeds
+    /// `init.fdk_threshold` of its maximum (as R2-Gaussian).
+    Fdk,
+}
+
+impl InitKind {
+    /// The name used on the command line and in plans.
+    pub fn name(self) -> &'static str {
+        match self {
+            InitKind::Acui => "acui",
+            InitKind::Random => "random",
+            InitKind::UnitCube => "unit-cube",
+            InitKind::Fdk => "fdk",
+        }
+    }
+}
+
+/// Default `init.points` (the upstream unit cube's 100,000).
+pub const DEFAULT_INIT_POINTS: usize = 100_000;
+/// Most `init.points` (each point becomes a Gaussian of about 100 bytes plus optimiser state).
+pub const MAX_INIT_POINTS: usize = 5_000_000;
+/// Default `init.fdk_threshold`, a fraction of the FDK volume's maximum (R2-Gaussian: 0.05 on
+/// its [0, 1] volume of a 360 degree orbit; see [`super::fdk_init`] for why ours is 0.10).
+pub const DEFAULT_FDK_THRESHOLD: f64 = 0.1;
+/// Half side of the upstream unit cube, scene units (mm).
+pub const UNIT_CUBE_HALF: f64 = 1.3;
+
+fn default_points() -> usize {
+    DEFAULT_INIT_POINTS
+}
+fn is_default_points(n: &usize) -> bool {
+    *n == DEFAULT_INIT_POINTS
+}
+fn default_fdk_threshold() -> f64 {
+    DEFAULT_FDK_THRESHOLD
+}
+fn is_default_fdk_threshold(t: &f64) -> bool {
+    *t == DEFAULT_FDK_THRESHOLD
 }
 
 /// Initialisation settings.
@@ -60,6 +117,17 @@ pub struct InitConfig {
     pub opacity: f64,
     /// Initial intensity of every Gaussian (0.5).
     pub intensity: f64,
+    /// Number of points of the `unit-cube` and `fdk` rules (100,000). Left out of the JSON at
+    /// its default, so configs written before the setting existed keep their fingerprint.
+    #[serde(default = "default_points", skip_serializing_if = "is_default_points")]
+    pub points: usize,
+    /// `fdk`: candidate voxels exceed this fraction of the FDK volume's maximum (0.1; left out
+    /// of the JSON at its default).
+    #[serde(
+        default = "default_fdk_threshold",
+        skip_serializing_if = "is_default_fdk_threshold"
+    )]
+    pub fdk_threshold: f64,
 }
 
 /// Per-axis ACUI coordinates: `linspace(-s, s, n)[::interval] + off`.
@@ -111,6 +179,39 @@ pub fn random_positions(geo: &ConeBeam, n: usize, seed: u64) -> Vec<[f64; 3]> {
             })
         })
         .collect()
+}
+
+/// `n` uniform points in the upstream unit cube `[-1.3, 1.3)^3` (seeded): upstream's
+/// `random() * 2.6 - 1.3` per coordinate.
+pub fn unit_cube_positions(n: usize, seed: u64) -> Vec<[f64; 3]> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x1a17_0000_0000_0003);
+    (0..n)
+        .map(|_| {
+            std::array::from_fn(|_| {
+                let u: f64 = rng.random();
+                u * (2.0 * UNIT_CUBE_HALF) - UNIT_CUBE_HALF
+            })
+        })
+        .collect()
+}
+
+/// Error naming the init rule unless at least one point lies inside the volume box.
+pub fn check_some_point_inside(geo: &ConeBeam, kind: InitKind, p: &[[f64; 3]]) -> Result<()> {
+    let (lo, hi) = geo.volume_box();
+    if p.iter()
+        .any(|q| (0..3).all(|a| q[a] >= lo[a] && q[a] <= hi[a]))
+    {
+        return Ok(());
+    }
+    Err(Error::invalid(
+        "init.kind (--init)",
+        format!(
+            "`{}` gave {} points and none inside the volume box {lo:?} .. {hi:?} mm: choose \
+             another initialiser",
+            kind.name(),
+            p.len()
+        ),
+    ))
 }
 
 /// Mean squared distance from each point to its 3 nearest other points (exact).
@@ -268,18 +369,35 @@ pub fn gaussians_at<R: Real>(
     })
 }
 
-/// The initial Gaussians of a run: ACUI or random points in the geometry's volume box.
+/// The initial points of a run on `ds`, which trains on its first `n_views` training views
+/// (the `fdk` rule reconstructs from those, with their recorded cameras).
+pub fn positions(
+    ds: &Dataset,
+    n_views: usize,
+    cfg: &InitConfig,
+    seed: u64,
+) -> Result<Vec<[f64; 3]>> {
+    let geo = &ds.geometry;
+    let pts = match cfg.kind {
+        InitKind::Acui => acui_positions(geo, cfg.interval)?,
+        InitKind::Random => random_positions(geo, acui_positions(geo, cfg.interval)?.len(), seed),
+        InitKind::UnitCube => unit_cube_positions(cfg.points, seed),
+        InitKind::Fdk => super::fdk_init::fdk_positions(ds, n_views, cfg, seed)?,
+    };
+    check_some_point_inside(geo, cfg.kind, &pts)?;
+    Ok(pts)
+}
+
+/// The initial Gaussians of a run on `ds` trained on its first `n_views` training views:
+/// [`positions`], then [`gaussians_at`].
 pub fn initialise<R: Real>(
-    geo: &ConeBeam,
+    ds: &Dataset,
+    n_views: usize,
     cfg: &InitConfig,
     color: ColorMode,
     seed: u64,
 ) -> Result<Gaussians<R>> {
-    let grid = acui_positions(geo, cfg.interval)?;
-    let pts = match cfg.kind {
-        InitKind::Acui => grid,
-        InitKind::Random => random_positions(geo, grid.len(), seed),
-    };
+    let pts = positions(ds, n_views, cfg, seed)?;
     gaussians_at(&pts, cfg, color)
 }
 
@@ -341,6 +459,8 @@ mod tests {
                 interval: 8,
                 opacity: 0.1,
                 intensity: 0.5,
+                points: DEFAULT_INIT_POINTS,
+                fdk_threshold: DEFAULT_FDK_THRESHOLD,
             },
             ColorMode::RirfPaper,
         )
@@ -363,6 +483,8 @@ mod tests {
                     interval: 8,
                     opacity: 0.1,
                     intensity: i,
+                    points: DEFAULT_INIT_POINTS,
+                    fdk_threshold: DEFAULT_FDK_THRESHOLD,
                 };
                 let g = gaussians_at::<f64>(&pts, &cfg, color).unwrap();
                 let got = match color {
@@ -380,6 +502,56 @@ mod tests {
         // f_dc = (127/255 - 0.5) / C0 = -0.00695.
         let f = feature_for_intensity(ColorMode::RirfXgaussian, 127.0 / 255.0);
         assert!((f + 0.006_951_4).abs() < 1e-6, "{f}");
+    }
+
+    #[test]
+    fn unit_cube_matches_the_upstream_rule() {
+        // X-Gaussian / UniSpine-GS `scene/dataset_readers.py` (3DGS `readNerfSyntheticInfo`):
+        // `num_pts` points `np.random.random((num_pts, 3)) * 2.6 - 1.3`; `create_from_pcd`:
+        // scale sqrt(max(1e-7, mean squared 3-NN distance)), opacity 0.1, identity rotation.
+        let cfg = InitConfig {
+            kind: InitKind::UnitCube,
+            interval: 8,
+            opacity: 0.1,
+            intensity: 0.5,
+            points: 700,
+            fdk_threshold: DEFAULT_FDK_THRESHOLD,
+        };
+        let p = unit_cube_positions(cfg.points, 3);
+        assert_eq!(p.len(), 700);
+        assert_eq!(p, unit_cube_positions(700, 3));
+        assert_ne!(p, unit_cube_positions(700, 4));
+        assert!(p.iter().flatten().all(|&x| (-1.3..1.3).contains(&x)));
+        // Uniform: the mean of each coordinate is near 0 and the extremes near +-1.3
+        // (700 samples: sd of the mean 0.75 / sqrt(700) = 0.028).
+        for a in 0..3 {
+            let m = p.iter().map(|q| q[a]).sum::<f64>() / 700.0;
+            assert!(m.abs() < 0.12, "axis {a}: mean {m}");
+            let lo = p.iter().map(|q| q[a]).fold(f64::INFINITY, f64::min);
+            let hi = p.iter().map(|q| q[a]).fold(f64::NEG_INFINITY, f64::max);
+            assert!(lo < -1.25 && hi > 1.25, "axis {a}: {lo} .. {hi}");
+        }
+        let g = gaussians_at::<f64>(&p, &cfg, ColorMode::Sh).unwrap();
+        let want = brute(&p);
+        assert_eq!(g.len(), 700);
+        for i in 0..700 {
+            let s = want[i].max(1e-7).sqrt();
+            for a in 0..3 {
+                assert!((g.log_scales[i][a].exp() - s).abs() <= 1e-12 * s, "{i}");
+            }
+            assert!((crate::math::activations::sigmoid(g.opacity_logits[i]) - 0.1).abs() < 1e-12);
+            assert_eq!(g.quats[i], [1.0, 0.0, 0.0, 0.0]);
+            assert_eq!(g.means[i], p[i]);
+        }
+        // The cube sits at the world origin (the isocentre), whatever offOrigin: a box moved
+        // away from it holds none of the points, which is an error naming the setting.
+        let mut far = geo([16, 16, 16], [1.0; 3]);
+        assert!(check_some_point_inside(&far, InitKind::UnitCube, &p).is_ok());
+        far.off_origin = [0.0, 0.0, 20.0];
+        let e = check_some_point_inside(&far, InitKind::UnitCube, &p)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("init.kind") && e.contains("unit-cube"), "{e}");
     }
 
     #[test]

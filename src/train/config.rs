@@ -33,7 +33,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::densify::DensifyConfig;
 use crate::error::{Error, Result};
-use crate::gaussians::init::{InitConfig, InitKind};
+use crate::gaussians::init::{InitConfig, InitKind, DEFAULT_FDK_THRESHOLD, DEFAULT_INIT_POINTS};
 use crate::loss::spwm::SpwmConfig;
 use crate::loss::{DataTerm, LossConfig};
 use crate::optim::schedule::ExponLr;
@@ -222,6 +222,8 @@ impl TrainConfig {
                 interval: 8,
                 opacity: 0.1,
                 intensity: 0.5,
+                points: DEFAULT_INIT_POINTS,
+                fdk_threshold: DEFAULT_FDK_THRESHOLD,
             },
             lr: LrConfig::default(),
             adam: AdamConfig::default(),

@@ -175,7 +175,7 @@ impl<'a> Trainer<'a> {
             .map(|t| cfg.spwm.as_ref().map(|c| spwm::view_prior(t, c)))
             .collect();
         let extent = scene_extent(ds, nv);
-        let g = init::initialise::<f32>(&ds.geometry, &cfg.init, cfg.color, cfg.seed)?;
+        let g = init::initialise::<f32>(ds, nv, &cfg.init, cfg.color, cfg.seed)?;
         let state = TrainState::new(g, cfg.adam);
         Ok(Trainer {
             rng: ChaCha8Rng::seed_from_u64(cfg.seed ^ 0x5ee0_0000_0000_0002),

@@ -35,7 +35,7 @@ use std::path::PathBuf;
 use super::compact::CompactConfig;
 use super::config::{Method, TrainConfig};
 use crate::error::{Error, Result};
-use crate::gaussians::init::InitKind;
+use crate::gaussians::init::{InitKind, MAX_INIT_POINTS};
 use crate::loss::DataTerm;
 use crate::render::ColorMode;
 
@@ -236,9 +236,17 @@ settings! {
         color: ColorMode => |c, v| c.color = v
     );
     "init.kind" flag(
-        /// Initialisation: acui or random.
+        /// Initialisation: acui, random, unit-cube or fdk.
         #[arg(value_enum)]
         init: InitKind => |c, v| c.init.kind = v
+    );
+    "init.points" range(|c| c.init.points as f64, ge_le(1.0, MAX_INIT_POINTS as f64)) flag(
+        /// Points of the unit-cube and fdk initialisers (upstream unit cube: 100000).
+        init_points: usize => |c, v| c.init.points = v
+    );
+    "init.fdk_threshold" range(|c| c.init.fdk_threshold, gt_lt(0.0, 1.0)) flag(
+        /// fdk initialiser: voxels above this fraction of the FDK volume's maximum (0.1).
+        fdk_threshold: f64 => |c, v| c.init.fdk_threshold = v
     );
     "init.interval" range(|c| c.init.interval as f64, ge_lt(1.0, INF)) flag(
         /// ACUI grid step in voxels.
@@ -450,8 +458,11 @@ mod tests {
         fields.dedup();
         assert_eq!(fields.len(), n, "a field declared twice");
         // Every declared field is a real config.json path.
-        // (with every optional section present, so its fields are in the JSON)
+        // (with every optional section present and the settings left out of the JSON at their
+        // default set otherwise, so their fields are in the JSON)
         let mut c = TrainConfig::preset(Method::Unispine);
+        c.init.points = 7;
+        c.init.fdk_threshold = 0.3;
         c.compact = Some(CompactConfig {
             keep: Some(0.5),
             to: Some(1),
@@ -480,6 +491,8 @@ mod tests {
                 "seed",
                 "color",
                 "init",
+                "init-points",
+                "fdk-threshold",
                 "acui-interval",
                 "init-intensity",
                 "data-term",
