@@ -428,8 +428,9 @@ pub fn tables_md(
             };
             let _ = writeln!(
                 s,
-                "| {} |{} {n} of {} | {} | {} | {} | {} | {gaussians} | {paper} |",
-                format!("{}{}", method_label(method, base), condition_suffix(rs)),
+                "| {}{} |{} {n} of {} | {} | {} | {} | {} | {gaussians} | {paper} |",
+                method_label(method, base),
+                condition_suffix(rs),
                 sv.as_ref().map(|v| format!(" {v} |")).unwrap_or_default(),
                 rs.len(),
                 pm(&vals(rs, |r| r.psnr), 2),

@@ -176,7 +176,11 @@ mod tests {
         assert!(d.contains("sign and magnitude reproduced (paper +8.21 dB is inside"));
         // Every condition and value.
         assert!(d.contains("## At each condition"));
-        for v in ["| pose-noise | 0.1 |", "| pose-noise | 0.2 |", "| init | acui |"] {
+        for v in [
+            "| pose-noise | 0.1 |",
+            "| pose-noise | 0.2 |",
+            "| init | acui |",
+        ] {
             assert!(d.contains(v), "no {v:?}");
         }
         assert!(d.contains("| above |") && d.contains("| below |") && d.contains("| inside |"));
