@@ -25,8 +25,7 @@
 //! base point, then for each condition and each of its values the methods it acts on. A method
 //! a condition does not act on is represented at that condition's points by its base cell (the
 //! pairs of the claims use it). Every value follows the name rule of sweep values and the flag's
-//! schema (`unispine train`'s parser; for data flags, [`DATA_FLAGS`] here and `unispine data`'s
-//! own parser before anything is built). Errors name the plan file, the key and the line.
+//! schema (`unispine train`'s parser; for data flags, the kinds of [`DATA_FLAGS`]). Errors name the plan file, the key and the line.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -74,9 +73,9 @@ pub enum Kind {
     Text,
 }
 
-/// The `unispine data` flags a condition may vary, with the kind of their values. Every one is
-/// a flag of each generator subcommand (a test of the CLI checks it against `unispine data`'s
-/// parser).
+/// The `unispine data` flags a condition may vary, with the kind of their values: flags every
+/// generator subcommand takes (`unispine data` itself checks the whole argument list when the
+/// dataset is built).
 pub const DATA_FLAGS: [(&str, Kind); 10] = [
     ("pose-noise-deg", Kind::NonNegative),
     ("pose-noise-mm", Kind::NonNegative),
