@@ -43,6 +43,10 @@ pub struct ReproduceArgs {
     /// DIR/slurm/submit.sh instead of running; the datasets are built now, once.
     #[arg(long)]
     pub emit_slurm: bool,
+    /// Also write this markdown file (e.g. docs/claims.md): every claim, at the base and at
+    /// every condition value, with the command, machine kind and commit in its header.
+    #[arg(long, value_name = "FILE")]
+    pub claims_doc: Option<PathBuf>,
 }
 
 fn fmt_s(s: f64) -> String {
@@ -155,7 +159,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
                 eprintln!("dataset {name}: skipped (optional): {reason}");
             }
         };
-        for d in &plan.datasets {
+        for d in &plan.dataset_builds() {
             run::prepare_dataset(d, &opts, &mut on_event)?;
         }
         let submit = unispine::reproduce::slurm::write_scripts(
@@ -278,6 +282,19 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
             m.reading()
         );
     }
+    if let Some(doc) = &args.claims_doc {
+        let header = unispine::reproduce::claims_doc::Header {
+            // The program by its name, not the path it was started from.
+            command: std::iter::once("unispine".to_string())
+                .chain(std::env::args().skip(1))
+                .collect::<Vec<_>>()
+                .join(" "),
+            machine: unispine::reproduce::provenance::Machine::detect(),
+        };
+        let text = unispine::reproduce::claims_doc::render(&plan, &rows, &header);
+        std::fs::write(doc, text).with_context(|| format!("--claims-doc {}", doc.display()))?;
+        println!("claims document: {}", doc.display());
+    }
     let missing = aggregate::missing(&rows);
     if !missing.is_empty() {
         println!(
@@ -291,7 +308,13 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
                 .join(", ")
         );
     }
-    let charts = unispine::report::reproduce::write_report(&rows, &out, &md, plan.floor_db)?;
+    let charts = unispine::report::reproduce::write_report(
+        &rows,
+        &out,
+        &md,
+        plan.floor_db,
+        unispine::report::holds::charts(&plan, &rows),
+    )?;
     println!(
         "\nreport: {}\ntables: {}\nresults: {}, {}\ncharts: {}",
         out.join("report.html").display(),

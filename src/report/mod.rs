@@ -1,6 +1,7 @@
 //! Reports: markdown tables and SVG charts read from run folders (`metrics.json`, `log.csv`),
 //! so that reports never recompute anything.
 
+pub mod holds;
 pub mod reproduce;
 pub mod svg;
 

@@ -256,10 +256,23 @@ fn heat(v: f64, lo: f64, hi: f64) -> String {
     format!("#{:02x}{:02x}{:02x}", c[0], c[1], c[2])
 }
 
-/// The stability map: one row per (dataset, method), one column per sweep value; each cell
+/// The stability map: one row per (dataset, method [at a condition value]), one column per
+/// sweep value; each cell
 /// shows the mean test PSNR over seeds, "×" when a seed diverged or failed, and a red frame
 /// when a seed fell below `floor_db`.
 pub fn stability_map(rows: &[Row], floor_db: Option<f64>) -> String {
+    // A method at a condition's value is a row of its own (`METHOD @ axis=value`).
+    let relabelled: Vec<Row> = rows
+        .iter()
+        .map(|r| match (&r.condition, &r.condition_value) {
+            (Some(a), Some(v)) => Row {
+                method: format!("{} @ {a}={v}", r.method),
+                ..r.clone()
+            },
+            _ => r.clone(),
+        })
+        .collect();
+    let rows = &relabelled[..];
     let ms = methods(rows);
     let ds = datasets(rows);
     let mut cols: Vec<Option<String>> = Vec::new();
@@ -500,16 +513,19 @@ pub fn markdown_to_html(md: &str) -> String {
     h
 }
 
-/// Write the charts into `out/charts/` and `out/report.html`; returns the chart paths.
+/// Write the charts (and `more`, e.g. [`super::holds::charts`]) into `out/charts/` and
+/// `out/report.html`; returns the chart paths.
 pub fn write_report(
     rows: &[Row],
     out: &Path,
     tables_md: &str,
     floor_db: Option<f64>,
+    more: Vec<(String, String, String)>,
 ) -> Result<Vec<std::path::PathBuf>> {
     let dir = out.join("charts");
     std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-    let cs = charts(rows, out, floor_db);
+    let mut cs = charts(rows, out, floor_db);
+    cs.extend(more);
     let mut paths = Vec::new();
     let mut body = String::new();
     for (name, title, svg) in &cs {
@@ -543,7 +559,7 @@ pub fn write_report(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     #[test]
@@ -563,7 +579,7 @@ mod tests {
 
     /// Check that `doc` is well-formed markup: tags nest, every `&` starts an entity, no `<`
     /// inside text or an attribute value; and that no element is named `script`.
-    fn assert_well_formed(doc: &str) {
+    pub(crate) fn assert_well_formed(doc: &str) {
         let mut stack: Vec<String> = Vec::new();
         let b = doc.as_bytes();
         let mut i = 0;

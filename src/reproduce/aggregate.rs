@@ -26,6 +26,9 @@ pub struct Row {
     pub base: String,
     pub sweep_flag: Option<String>,
     pub sweep_value: Option<String>,
+    /// The condition axis and value of the cell (None: the base point).
+    pub condition: Option<String>,
+    pub condition_value: Option<String>,
     pub seed: u64,
     pub iters: usize,
     /// `done`, `running`, `stopped`, `failed` or `missing` (no record).
@@ -116,8 +119,10 @@ fn read_row(plan: &Plan, out: &Path, c: &Cell) -> Row {
         base: c.method.base.clone(),
         sweep_flag: plan.sweep.as_ref().map(|s| s.flag.clone()),
         sweep_value: c.sweep.clone(),
+        condition: plan.point_label(c.point).map(|p| p.0),
+        condition_value: plan.point_label(c.point).map(|p| p.1),
         seed: c.seed,
-        iters: plan.iters,
+        iters: c.iters(plan),
         status: status.into(),
         completed,
         psnr: m.and_then(|m| num(m, "test_psnr")).filter(|_| ok),
@@ -176,9 +181,10 @@ fn o<T: ToString>(v: &Option<T>) -> String {
 /// the file is bit-exact.
 pub fn to_csv(rows: &[Row]) -> String {
     let mut s = String::from(
-        "index,dataset,paper_dataset,method,base,sweep_flag,sweep_value,seed,iters,status,\
-         completed,psnr,ssim,train_time_s,fps,n_gaussians,peak_memory_mib,wall_s,run_dir,\
-         version,git_commit,dataset_checksum,config_hash,cpu_model,cores,simd,threads,error\n",
+        "index,dataset,paper_dataset,method,base,sweep_flag,sweep_value,condition,\
+         condition_value,seed,iters,status,completed,psnr,ssim,train_time_s,fps,n_gaussians,\
+         peak_memory_mib,wall_s,run_dir,version,git_commit,dataset_checksum,config_hash,\
+         cpu_model,cores,simd,threads,error\n",
     );
     for r in rows {
         let f = [
@@ -189,6 +195,8 @@ pub fn to_csv(rows: &[Row]) -> String {
             r.base.clone(),
             o(&r.sweep_flag),
             o(&r.sweep_value),
+            o(&r.condition),
+            o(&r.condition_value),
             r.seed.to_string(),
             r.iters.to_string(),
             r.status.clone(),
@@ -218,9 +226,20 @@ pub fn to_csv(rows: &[Row]) -> String {
     s
 }
 
-/// Pairing observations for the verdicts: key = dataset / seed / sweep value.
+/// ` @ axis = value` of a group's rows at a condition's value (empty at the base).
+fn condition_suffix(rs: &[&Row]) -> String {
+    match rs.first().map(|r| (&r.condition, &r.condition_value)) {
+        Some((Some(a), Some(v))) => format!(" @ {a} = {v}"),
+        _ => String::new(),
+    }
+}
+
+/// Pairing observations for the verdicts: key = dataset / seed / sweep value. Rows at a
+/// condition's value are left out: a plan's verdicts are those of its base point (the section
+/// "Where each claim holds", [`super::holds`], gives the others).
 pub fn observations(rows: &[Row]) -> Vec<Obs> {
     rows.iter()
+        .filter(|r| r.condition.is_none())
         .filter_map(|r| {
             Some(Obs {
                 key: format!("{}/{}/{}", r.dataset, r.seed, o(&r.sweep_value)),
@@ -310,14 +329,18 @@ pub fn describe(plan: &Plan, method: &str, preset_help: &[(String, String)]) -> 
     }
 }
 
-/// Groups of rows: (dataset, method, sweep value) in plan order.
+/// Groups of rows: (dataset, method, sweep value, condition point) in plan order.
 pub fn groups(rows: &[Row]) -> Vec<(String, String, Option<String>, Vec<&Row>)> {
     let mut g: Vec<(String, String, Option<String>, Vec<&Row>)> = Vec::new();
     for r in rows {
-        match g
-            .iter_mut()
-            .find(|x| x.0 == r.dataset && x.1 == r.method && x.2 == r.sweep_value)
-        {
+        match g.iter_mut().find(|x| {
+            x.0 == r.dataset
+                && x.1 == r.method
+                && x.2 == r.sweep_value
+                && x.3.first().is_some_and(|f| {
+                    f.condition == r.condition && f.condition_value == r.condition_value
+                })
+        }) {
             Some(x) => x.3.push(r),
             None => g.push((
                 r.dataset.clone(),
@@ -405,8 +428,9 @@ pub fn tables_md(
             };
             let _ = writeln!(
                 s,
-                "| {} |{} {n} of {} | {} | {} | {} | {} | {gaussians} | {paper} |",
+                "| {}{} |{} {n} of {} | {} | {} | {} | {} | {gaussians} | {paper} |",
                 method_label(method, base),
+                condition_suffix(rs),
                 sv.as_ref().map(|v| format!(" {v} |")).unwrap_or_default(),
                 rs.len(),
                 pm(&vals(rs, |r| r.psnr), 2),
@@ -427,6 +451,7 @@ pub fn tables_md(
             describe(plan, &m.name, preset_help)
         );
     }
+    s.push_str(&super::holds::describe_conditions(plan));
     let base_of =
         |m: &crate::reproduce::plan::MethodSpec| crate::baseline::Baseline::parse(&m.base);
     if plan.methods.iter().any(|m| base_of(m).is_none()) {
@@ -522,6 +547,7 @@ pub fn tables_md(
         }
     );
     s.push_str(&super::magnitude::section(plan, rows));
+    s.push_str(&super::holds::section(plan, rows));
     // Cells that did not complete.
     let bad: Vec<&Row> = rows.iter().filter(|r| r.psnr.is_none()).collect();
     if !bad.is_empty() {

@@ -1,18 +1,23 @@
-//! The cells of a plan (dataset x method x [sweep value x] seed) and the `unispine train`
-//! arguments of each: Gaussian cells get the plan's iterations, schedule and `[train]` flags;
+//! The cells of a plan (dataset x condition point x method x [sweep value x] seed) and the
+//! `unispine train` arguments of each: Gaussian cells get the plan's iterations, schedule,
+//! `[train]` flags and the train conditions' values at their point;
 //! baseline cells their seed, fields `--iters` from `field_iters`, and only the flags a baseline
 //! takes ([`crate::baseline::FLAGS`]).
 
 use std::path::{Path, PathBuf};
 
+use super::plan::conditions::{Point, Target, ITERS};
 use super::plan::{MethodSpec, Plan};
 
 /// One cell of a plan.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Cell {
-    /// 0-based position in the plan's cell order (dataset, method, sweep value, seed).
+    /// 0-based position in the plan's cell order (dataset, point, method, sweep value, seed).
     pub index: usize,
     pub dataset: String,
+    /// The condition point (None: the base). At a method condition's value, `method` keeps
+    /// the plan method's name with the replacing preset's base and flags.
+    pub point: Point,
     pub method: MethodSpec,
     /// The sweep value of this cell (the flag is the plan's).
     pub sweep: Option<String>,
@@ -22,10 +27,33 @@ pub struct Cell {
 impl Cell {
     /// Folder of the method (and sweep value) below `runs/DATASET/`.
     pub fn method_dir(&self, plan: &Plan) -> String {
-        match (&plan.sweep, &self.sweep) {
+        let mut d = match (&plan.sweep, &self.sweep) {
             (Some(s), Some(v)) => format!("{}@{}={}", self.method.name, s.flag, v),
             _ => self.method.name.clone(),
+        };
+        if let Some((axis, value)) = plan.point_label(self.point) {
+            d.push_str(&format!("@{axis}={value}"));
         }
+        d
+    }
+    /// The dataset folder this cell reads ([`Plan::data_name`]).
+    pub fn data_name(&self, plan: &Plan) -> String {
+        plan.data_name(&self.dataset, self.point)
+    }
+    /// Training iterations of this cell: the plan's, or a schedule condition's value.
+    pub fn iters(&self, plan: &Plan) -> usize {
+        if let Some((ci, vi)) = self.point {
+            let c = &plan.conditions[ci];
+            if c.on == Target::Train && c.flag == ITERS {
+                return c.values[vi].parse().unwrap_or(plan.iters);
+            }
+        }
+        plan.conditions
+            .iter()
+            .find(|c| c.on == Target::Train && c.flag == ITERS && c.acts_on(&self.method.name))
+            .and_then(|c| c.base.as_ref())
+            .and_then(|b| b.parse().ok())
+            .unwrap_or(plan.iters)
     }
     /// The run folder relative to OUT.
     pub fn rel_dir(&self, plan: &Plan) -> PathBuf {
@@ -47,7 +75,7 @@ impl Cell {
         let baseline = crate::baseline::Baseline::parse(&self.method.base);
         let mut a = vec!["--method".to_string(), self.method.base.clone()];
         match baseline {
-            None => a.extend(["--iters".into(), plan.iters.to_string()]),
+            None => a.extend(["--iters".into(), self.iters(plan).to_string()]),
             Some(crate::baseline::Baseline::Field(_)) => {
                 if let Some(n) = plan.field_iters {
                     a.extend(["--iters".into(), n.to_string()]);
@@ -61,6 +89,20 @@ impl Cell {
         }
         let mut flags: Vec<String> = plan.train_args.clone();
         flags.extend(self.method.args.iter().cloned());
+        // Train conditions: the value at this cell's point, the base value elsewhere.
+        for (ci, c) in plan.conditions.iter().enumerate() {
+            if c.on != Target::Train || c.flag == ITERS || !c.acts_on(&self.method.name) {
+                continue;
+            }
+            let v = match self.point {
+                Some((pc, vi)) if pc == ci => Some(&c.values[vi]),
+                _ => c.base.as_ref(),
+            };
+            if let Some(v) = v {
+                flags.push(format!("--{}", c.flag));
+                flags.push(v.clone());
+            }
+        }
         if let (Some(s), Some(v)) = (&plan.sweep, &self.sweep) {
             flags.push(format!("--{}", s.flag));
             flags.push(v.clone());
@@ -89,7 +131,9 @@ fn baseline_flags(flags: &[String]) -> Vec<String> {
     out
 }
 
-/// Every cell of the plan, in order: dataset, method, sweep value, seed.
+/// Every cell of the plan, in order: dataset, condition point (the base, then each
+/// condition's values), method (at a condition's value, only those it acts on), sweep value,
+/// seed.
 pub fn cells(plan: &Plan) -> Vec<Cell> {
     let sweep: Vec<Option<String>> = match &plan.sweep {
         Some(s) => s.values.iter().cloned().map(Some).collect(),
@@ -97,16 +141,35 @@ pub fn cells(plan: &Plan) -> Vec<Cell> {
     };
     let mut out = Vec::new();
     for d in &plan.datasets {
-        for m in &plan.methods {
-            for v in &sweep {
-                for &seed in &plan.seeds {
-                    out.push(Cell {
-                        index: out.len(),
-                        dataset: d.name.clone(),
-                        method: m.clone(),
-                        sweep: v.clone(),
-                        seed,
-                    });
+        for p in plan.points() {
+            for m in &plan.methods {
+                let spec = match p {
+                    None => m.clone(),
+                    Some((ci, vi)) => {
+                        let c = &plan.conditions[ci];
+                        if !c.acts_on(&m.name) {
+                            continue;
+                        }
+                        match c.on {
+                            Target::Method => MethodSpec {
+                                name: m.name.clone(),
+                                ..c.replacements[vi].clone()
+                            },
+                            _ => m.clone(),
+                        }
+                    }
+                };
+                for v in &sweep {
+                    for &seed in &plan.seeds {
+                        out.push(Cell {
+                            index: out.len(),
+                            dataset: d.name.clone(),
+                            point: p,
+                            method: spec.clone(),
+                            sweep: v.clone(),
+                            seed,
+                        });
+                    }
                 }
             }
         }

@@ -6,7 +6,8 @@
 //! `unispine train` child processes into `OUT/runs/DATASET/METHOD/seedK/`, resumable) ->
 //! [`aggregate`] (results.csv / results.json, mean +- sd per row) -> [`verdict`] (the paper's
 //! claims as paired differences with 95 % intervals) -> [`magnitude`] (the paper's effect
-//! against those intervals, per dataset and pooled) -> `tables.md`.
+//! against those intervals, per dataset and pooled) -> [`holds`] (each claim at each value of
+//! the plan's conditions) -> `tables.md`.
 //!
 //! [`plan`]: crate::reproduce::plan
 //! [`cell`]: crate::reproduce::cell
@@ -14,10 +15,13 @@
 //! [`aggregate`]: crate::reproduce::aggregate
 //! [`verdict`]: crate::reproduce::verdict
 //! [`magnitude`]: crate::reproduce::magnitude
+//! [`holds`]: crate::reproduce::holds
 
 pub mod aggregate;
 pub mod cell;
+pub mod claims_doc;
 pub mod compactness;
+pub mod holds;
 pub mod magnitude;
 pub mod plan;
 pub mod provenance;

@@ -461,8 +461,9 @@ pub fn run_plan(
     };
     // Datasets the chosen cells need, each prepared once.
     let mut ready: Vec<(String, std::result::Result<ReadyDataset, String>)> = Vec::new();
-    for d in &plan.datasets {
-        if !chosen.iter().any(|c| c.dataset == d.name) {
+    // One dataset per plan dataset and data-condition value ([`Plan::dataset_builds`]).
+    for d in &plan.dataset_builds() {
+        if !chosen.iter().any(|c| c.data_name(plan) == d.name) {
             continue;
         }
         match prepare_dataset(d, opts, on_event) {
@@ -480,7 +481,7 @@ pub fn run_plan(
     // Cells of skipped (optional, unavailable) datasets are left out.
     let todo: Vec<Cell> = chosen
         .into_iter()
-        .filter(|c| ready.iter().any(|r| r.0 == c.dataset))
+        .filter(|c| ready.iter().any(|r| r.0 == c.data_name(plan)))
         .collect();
     let n = todo.len();
     let jobs = opts.jobs.clamp(1, n.max(1));
@@ -510,7 +511,7 @@ pub fn run_plan(
                 let _ = tx.send((i, true, Outcome::Kept));
                 let ds = ready
                     .iter()
-                    .find(|r| r.0 == c.dataset)
+                    .find(|r| r.0 == c.data_name(plan))
                     .map(|r| r.1.as_ref().map_err(|e| e.as_str()))
                     .unwrap_or(Err("not prepared"));
                 let o = run_cell(c, plan, ds, opts, threads, machine);

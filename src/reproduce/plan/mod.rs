@@ -1,6 +1,6 @@
 //! Reproduction plans: a TOML file naming datasets x methods x seeds with one schedule, parsed
 //! with line-numbered errors, plus the built-in plans (`quick`, `table2`, `table1`, `stability`,
-//! `compactness`, `budgets` and their `-full` twins).
+//! `compactness`, `budgets`, `gap` and their `-full` twins).
 //!
 //! Schema (every key but the marked ones is optional):
 //!
@@ -18,6 +18,12 @@
 //! [sweep]                           # one more axis: a `unispine train` flag and its values
 //! flag = "train-views"
 //! values = [5, 10, 25, 50]
+//! [[conditions]]                   # axes varied one at a time from the base ([`conditions`])
+//! axis = "pose-noise"
+//! on = "data"                       # "data", "train" (a flag or `iters`) or "method"
+//! flag = "pose-noise-deg"
+//! base = 0
+//! values = [0.05, 0.1]
 //! [slurm]
 //! cpus_per_task = 2
 //! mem = "4G"
@@ -49,6 +55,7 @@ use toml::Spanned;
 
 use crate::error::{Error, Result};
 
+pub mod conditions;
 pub mod names;
 mod slurm_spec;
 mod train_flags;
@@ -113,6 +120,8 @@ pub struct Plan {
     /// `unispine train` arguments for every cell.
     pub train_args: Vec<String>,
     pub sweep: Option<Sweep>,
+    /// Axes varied one at a time from the base ([`conditions`]).
+    pub conditions: Vec<conditions::Condition>,
     pub floor_db: Option<f64>,
     pub slurm: SlurmSpec,
     /// The TOML text the plan was parsed from (hashed into each cell's key).
@@ -138,6 +147,8 @@ struct RawPlan {
     train: Flags,
     #[serde(default)]
     sweep: Option<Spanned<RawSweep>>,
+    #[serde(default)]
+    conditions: Vec<Spanned<conditions::RawCondition>>,
     #[serde(default)]
     floor_db: Option<f64>,
     #[serde(default)]
@@ -565,6 +576,18 @@ impl Plan {
                 Some(Sweep { flag, values })
             }
         };
+        let conditions = conditions::parse(
+            &raw.conditions,
+            &conditions::Ctx {
+                file,
+                text,
+                schema,
+                train_args: &train_args,
+                methods: &methods,
+                variants: &variants,
+                datasets: &datasets,
+            },
+        )?;
         let slurm = match raw.slurm {
             None => SlurmSpec::default(),
             Some(s) => SlurmSpec::from_raw(s, file, text)?,
@@ -579,6 +602,7 @@ impl Plan {
             datasets,
             train_args,
             sweep,
+            conditions,
             floor_db: raw.floor_db,
             slurm,
             text: text.to_string(),
@@ -614,11 +638,12 @@ pub const MAX_PLAN_BYTES: u64 = 1 << 20;
 pub const DEFAULT_MAX_CELLS: usize = 10_000;
 
 impl Plan {
-    /// Number of cells (datasets x methods x sweep values x seeds), saturating.
+    /// Number of cells (datasets x methods, each at the base and at the values of the
+    /// conditions acting on it, x sweep values x seeds), saturating.
     pub fn n_cells(&self) -> usize {
         [
             self.datasets.len(),
-            self.methods.len(),
+            self.method_points(),
             self.sweep.as_ref().map_or(1, |s| s.values.len()),
             self.seeds.len(),
         ]
@@ -633,10 +658,10 @@ impl Plan {
             return Err(Error::invalid(
                 "--max-cells",
                 format!(
-                    "plan `{}` has {n} cells ({} datasets x {} methods x {} sweep values x {}                      seeds), more than the {max} allowed; raise the limit with --max-cells {n}                      if that is meant",
+                    "plan `{}` has {n} cells ({} datasets x {} methods (with their condition values) x {} sweep values x {}                      seeds), more than the {max} allowed; raise the limit with --max-cells {n}                      if that is meant",
                     self.name,
                     self.datasets.len(),
-                    self.methods.len(),
+                    self.method_points(),
                     self.sweep.as_ref().map_or(1, |s| s.values.len()),
                     self.seeds.len()
                 ),
@@ -647,7 +672,7 @@ impl Plan {
 }
 
 /// The built-in plans: name and TOML text.
-pub const BUILTIN: [(&str, &str); 12] = [
+pub const BUILTIN: [(&str, &str); 14] = [
     ("quick", include_str!("../plans/quick.toml")),
     ("table2", include_str!("../plans/table2.toml")),
     ("table2-full", include_str!("../plans/table2-full.toml")),
@@ -666,6 +691,8 @@ pub const BUILTIN: [(&str, &str); 12] = [
     ("budgets", include_str!("../plans/budgets.toml")),
     ("budgets-full", include_str!("../plans/budgets-full.toml")),
     ("quick-full", include_str!("../plans/quick-full.toml")),
+    ("gap", include_str!("../plans/gap.toml")),
+    ("gap-full", include_str!("../plans/gap-full.toml")),
 ];
 
 /// The TOML text of a built-in plan.

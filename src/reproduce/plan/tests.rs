@@ -236,3 +236,316 @@ fn settings_a_baseline_cannot_follow_are_plan_errors() {
         assert!(e.contains(line) && e.contains(word), "{e}\n--\n{text}");
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Conditions.
+
+const COND: &str = "name = \"c\"\niters = 10\nseeds = [0, 1]\n\
+                    methods = [\"3dgs\", \"xgaussian\", \"v\"]\n\
+                    [variants.v]\nbase = \"unispine\"\nspwm = false\n\
+                    [variants.w]\nbase = \"3dgs\"\ngrad_threshold = 2e-4\n\
+                    [[conditions]]\naxis = \"pose-noise\"\non = \"data\"\nflag = \"pose-noise-deg\"\n\
+                    base = 0\nvalues = [0.1, 0.2]\n\
+                    [[conditions]]\naxis = \"init\"\non = \"train\"\nflag = \"init\"\n\
+                    methods = [\"3dgs\"]\nvalues = [\"acui\"]\n\
+                    [[conditions]]\naxis = \"preset\"\non = \"method\"\nmethods = [\"3dgs\"]\n\
+                    values = [\"w\"]\n\
+                    [[conditions]]\naxis = \"schedule\"\non = \"train\"\nflag = \"iters\"\n\
+                    values = [20]\n\
+                    [[datasets]]\nname = \"ph\"\n\
+                    data = [\"phantom\", \"--size\", \"16\", \"--detector\", \"16\"]\n\
+                    [[datasets]]\nname = \"q\"\ndata = [\"phantom\", \"--size\", \"8\"]\n";
+
+#[test]
+fn conditions_expand_one_at_a_time() {
+    let p = parse(COND).unwrap();
+    assert_eq!(p.conditions.len(), 4);
+    // Per dataset and seed: 3 base + 2 x 3 pose + 1 init + 1 preset + 3 schedule = 14.
+    assert_eq!(p.method_points(), 14);
+    assert_eq!(p.n_cells(), 2 * 14 * 2);
+    let cs = crate::reproduce::cell::cells(&p);
+    assert_eq!(cs.len(), p.n_cells());
+    assert!(cs.iter().enumerate().all(|(i, c)| c.index == i));
+    let dirs: Vec<String> = cs
+        .iter()
+        .filter(|c| c.dataset == "ph" && c.seed == 0)
+        .map(|c| c.method_dir(&p))
+        .collect();
+    assert_eq!(
+        dirs,
+        [
+            "3dgs",
+            "xgaussian",
+            "v",
+            "3dgs@pose-noise=0.1",
+            "xgaussian@pose-noise=0.1",
+            "v@pose-noise=0.1",
+            "3dgs@pose-noise=0.2",
+            "xgaussian@pose-noise=0.2",
+            "v@pose-noise=0.2",
+            "3dgs@init=acui",
+            "3dgs@preset=w",
+            "3dgs@schedule=20",
+            "xgaussian@schedule=20",
+            "v@schedule=20",
+        ]
+    );
+    let by = |dir: &str| {
+        cs.iter()
+            .find(|c| c.dataset == "ph" && c.seed == 1 && c.method_dir(&p) == dir)
+            .unwrap()
+    };
+    // One condition at a time: the init cell has no schedule change, the base dataset, and
+    // only its own train flag; the others keep their base values.
+    let init = by("3dgs@init=acui");
+    let a = init.train_args(&p);
+    assert!(a.windows(2).any(|w| w == ["--init", "acui"]), "{a:?}");
+    assert!(a.windows(2).any(|w| w == ["--iters", "10"]), "{a:?}");
+    assert_eq!(init.data_name(&p), "ph");
+    let base = by("3dgs").train_args(&p);
+    assert!(!base.contains(&"--init".to_string()), "{base:?}");
+    // The schedule condition sets --iters and nothing else.
+    let sch = by("v@schedule=20").train_args(&p);
+    assert!(sch.windows(2).any(|w| w == ["--iters", "20"]), "{sch:?}");
+    assert!(sch.windows(2).any(|w| w == ["--spwm", "false"]), "{sch:?}");
+    // The preset condition: the method keeps its name, runs the variant's preset and flags.
+    let pre = by("3dgs@preset=w");
+    assert_eq!(pre.method.name, "3dgs");
+    assert_eq!(pre.method.base, "3dgs");
+    assert!(pre
+        .train_args(&p)
+        .windows(2)
+        .any(|w| w == ["--grad-threshold", "0.0002"]));
+    // A pose cell reads its own dataset, built once with the value replacing the base.
+    let pose = by("xgaussian@pose-noise=0.2");
+    assert_eq!(pose.data_name(&p), "ph@pose-noise=0.2");
+    let builds = p.dataset_builds();
+    let names: Vec<&str> = builds.iter().map(|d| d.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "ph",
+            "ph@pose-noise=0.1",
+            "ph@pose-noise=0.2",
+            "q",
+            "q@pose-noise=0.1",
+            "q@pose-noise=0.2"
+        ]
+    );
+    let args = |i: usize| match &builds[i].source {
+        Source::Data(a) => a.join(" "),
+        _ => unreachable!(),
+    };
+    assert_eq!(
+        args(0),
+        "phantom --size 16 --detector 16 --pose-noise-deg 0"
+    );
+    assert_eq!(
+        args(2),
+        "phantom --size 16 --detector 16 --pose-noise-deg 0.2"
+    );
+    // Every cell's dataset is one of the builds.
+    assert!(cs.iter().all(|c| names.contains(&c.data_name(&p).as_str())));
+}
+
+#[test]
+fn a_data_flag_already_given_is_replaced() {
+    let t = COND.replace(
+        "flag = \"pose-noise-deg\"\nbase = 0\nvalues = [0.1, 0.2]",
+        "flag = \"detector\"\nvalues = [32]",
+    );
+    let p = parse(&t).unwrap();
+    let b = p.dataset_builds();
+    assert_eq!(
+        b[1].source,
+        Source::Data(
+            ["phantom", "--size", "16", "--detector", "32"]
+                .map(String::from)
+                .to_vec()
+        )
+    );
+    assert_eq!(
+        b[3].source,
+        Source::Data(
+            ["phantom", "--size", "8", "--detector", "32"]
+                .map(String::from)
+                .to_vec()
+        )
+    );
+}
+
+#[test]
+fn hostile_conditions_are_refused_with_line_and_key() {
+    let pose = "values = [0.1, 0.2]";
+    let cases: Vec<(String, &str, &str)> = vec![
+        (
+            COND.replace("axis = \"init\"", "axis = \"../x\""),
+            "line 18",
+            "conditions.axis",
+        ),
+        (
+            COND.replace("axis = \"init\"", "axis = \"pose-noise\""),
+            "line 18",
+            "repeats",
+        ),
+        (COND.replace(pose, "values = [-0.1]"), "line 16", "-0.1"),
+        (COND.replace(pose, "values = [\"nan\"]"), "line 16", "nan"),
+        (
+            COND.replace(pose, "values = [0.1, 1e-1]"),
+            "line 16",
+            "repeats",
+        ),
+        (COND.replace(pose, "values = [0]"), "line 16", "repeats"),
+        (COND.replace(pose, "values = [\"a/b\"]"), "line 16", "a/b"),
+        (COND.replace(pose, "values = []"), "line 16", "empty"),
+        (
+            COND.replace("flag = \"pose-noise-deg\"", "flag = \"out\""),
+            "line 14",
+            "out",
+        ),
+        (
+            COND.replace("flag = \"init\"", "flag = \"colour\""),
+            "line 20",
+            "colour",
+        ),
+        (
+            COND.replace("flag = \"init\"", "flag = \"seed\""),
+            "line 20",
+            "seed",
+        ),
+        (
+            COND.replace("values = [\"acui\"]", "values = [\"sphere\"]"),
+            "line 22",
+            "sphere",
+        ),
+        (
+            COND.replace("on = \"data\"", "on = \"disk\""),
+            "line 13",
+            "disk",
+        ),
+        (
+            COND.replace("values = [\"w\"]", "values = [\"nope\"]"),
+            "line 27",
+            "nope",
+        ),
+        (
+            COND.replace("values = [\"w\"]", "values = [\"3dgs\"]"),
+            "line 27",
+            "itself",
+        ),
+        (
+            COND.replace(
+                "methods = [\"3dgs\"]\nvalues = [\"acui\"]",
+                "methods = [\"nerf\"]\nvalues = [\"acui\"]",
+            ),
+            "line 21",
+            "nerf",
+        ),
+        (
+            COND.replace("values = [20]", "values = [0]"),
+            "line 32",
+            "iters",
+        ),
+        (
+            COND.replace("values = [20]", "values = [1e12]"),
+            "line 32",
+            "iters",
+        ),
+        (
+            COND.replace("flag = \"iters\"\n", ""),
+            "line 28",
+            "missing `flag`",
+        ),
+        (
+            COND.replace(
+                "on = \"data\"\nflag = \"pose-noise-deg\"",
+                "on = \"data\"\nflag = \"volume\"",
+            ),
+            "line 14",
+            "volume",
+        ),
+        (
+            COND.replace("on = \"data\"", "on = \"data\"\nbogus = 1"),
+            "line 14",
+            "bogus",
+        ),
+    ];
+    for (text, line, word) in cases {
+        let e = parse(&text).unwrap_err().to_string();
+        assert!(
+            e.contains(line) && e.contains(word) && e.contains("p.toml"),
+            "{e}\n--\n{text}"
+        );
+    }
+    // A data condition needs datasets the plan builds.
+    let d = tempfile::tempdir().unwrap();
+    let path_ds = COND.replace(
+        "data = [\"phantom\", \"--size\", \"8\"]",
+        "path = \"ds\"\noptional = true",
+    );
+    let e = Plan::parse(
+        &path_ds,
+        Path::new("p.toml"),
+        d.path(),
+        &TrainSchema::of_train(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("conditions.pose-noise") && e.contains("`q`"),
+        "{e}"
+    );
+}
+
+#[test]
+fn too_many_condition_cells_are_refused_before_anything_runs() {
+    let many: Vec<String> = (1..=1300)
+        .map(|i| format!("{}", i as f64 / 10000.0))
+        .collect();
+    let t = COND.replace(
+        "values = [0.1, 0.2]",
+        &format!("values = [{}]", many.join(", ")),
+    );
+    let p = parse(&t).unwrap();
+    // 3 base + 1300 x 3 pose + 1 + 1 + 3 = 3908 per dataset and seed.
+    assert_eq!(p.n_cells(), 2 * 3908 * 2);
+    let e = p.check_cells(DEFAULT_MAX_CELLS).unwrap_err().to_string();
+    assert!(
+        e.contains("15632 cells") && e.contains("--max-cells"),
+        "{e}"
+    );
+    assert!(p.check_cells(15632).is_ok());
+}
+
+#[test]
+fn the_charbonnier_only_variant_is_unispine_without_spwm_with_plain_charbonnier() {
+    use clap::FromArgMatches;
+    let p = Plan::load("gap", &TrainSchema::of_train()).unwrap();
+    let v = p
+        .methods
+        .iter()
+        .find(|m| m.name == "charbonnier-only")
+        .unwrap();
+    assert_eq!(v.base, "unispine");
+    let argv = std::iter::once("train".to_string()).chain(v.args.iter().cloned());
+    let m = crate::train::TrainOverrides::command()
+        .try_get_matches_from(argv)
+        .unwrap();
+    let o = crate::train::TrainOverrides::from_arg_matches(&m).unwrap();
+    let cfg = o.apply(crate::train::Method::Unispine, None).unwrap();
+    let preset = crate::train::TrainOverrides::default()
+        .apply(crate::train::Method::Unispine, None)
+        .unwrap();
+    assert!(cfg.spwm.is_none());
+    assert_eq!(cfg.loss.data_term, crate::loss::DataTerm::Charbonnier);
+    assert!(preset.spwm.is_some());
+    assert_eq!(
+        preset.loss.data_term,
+        crate::loss::DataTerm::WeightedCharbonnier
+    );
+    // Everything else is the unispine preset's.
+    let mut same = cfg.clone();
+    same.spwm = preset.spwm.clone();
+    same.loss.data_term = preset.loss.data_term;
+    assert_eq!(same, preset);
+}
