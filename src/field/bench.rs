@@ -14,13 +14,13 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use super::adam::FlatAdam;
 use super::mlp::Cache;
 use super::render::{self, Ray};
 use super::train::{cpu_seconds, Sampling, StageTimes, Workspace, RAYS_PER_BLOCK};
 use super::{Field, FieldConfig};
 use crate::audit::bench::bench_geometry;
 use crate::error::Result;
+use crate::optim::FlatAdam;
 use crate::simd::Simd;
 
 /// Wall and process CPU seconds of `f`.

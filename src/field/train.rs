@@ -25,7 +25,6 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use super::adam::FlatAdam;
 use super::checkpoint::FieldCheckpoint;
 use super::mlp::Cache;
 use super::render::{self, Ray, MM};
@@ -35,6 +34,7 @@ use crate::error::{Error, Result};
 use crate::geometry::ConeBeam;
 use crate::image2d::Image2d;
 use crate::optim::schedule::StepLr;
+use crate::optim::FlatAdam;
 use crate::real::Real;
 use crate::simd::Simd;
 
