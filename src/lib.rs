@@ -32,6 +32,8 @@ pub mod math;
 pub mod par;
 pub mod preview;
 pub mod simd;
+// The clocks of the stage timers (wall and CPU time).
+pub mod timer;
 
 // The pipeline, in data-flow order (one stage per module).
 
@@ -66,19 +68,30 @@ pub mod optim;
 /// Adaptive density control: clone, split, prune, opacity reset.
 pub mod densify;
 
+/// Evaluation: PSNR, SSIM, fps (also run inside the training loop).
+pub mod eval;
+
+// What one training iteration of any method did: the one step record.
+pub mod record;
+
 /// Neural attenuation fields (NAF, IntraTomo, NeRF baselines): encoders, MLP, line-integral
 /// renderer, trainer; forward + backward.
 pub mod field;
 
-/// Evaluation: PSNR, SSIM, fps (also run inside the training loop).
-pub mod eval;
-
-/// Method presets and the training loop.
+/// Method presets and the Gaussian trainer.
 pub mod train;
 
-/// Table 1's baselines behind `train --method`: scoring of predicted line integrals, run folder,
-/// a field run's checkpoints and resume.
+/// Table 1's baselines behind `train --method`: scoring of predicted line integrals, the
+/// baseline settings and run-folder files.
 pub mod baseline;
+
+// The registry of every method (Gaussian presets and baselines) and the interface a method
+// implements for the session driver: step, evaluate, checkpoint, restore, describe.
+pub mod method;
+
+// The one driver of any method: iterations, stop requests, progress events, the run folder,
+// checkpoints and resume.
+pub mod session;
 
 /// `unispine reproduce`: plans of datasets x methods x seeds, tables with verdicts, charts.
 pub mod reproduce;

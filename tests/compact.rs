@@ -9,9 +9,10 @@ use std::sync::atomic::AtomicBool;
 use unispine::gaussians::Gaussians;
 use unispine::geometry::{Camera, ConeBeam};
 use unispine::render::{self, tiles, ColorMode, RenderSettings};
+use unispine::session::{self, Control};
 use unispine::simd::Simd;
 use unispine::train::compact::{self, CompactConfig};
-use unispine::train::{self, Control, Event, Method, RunDir, TrainOverrides, Trainer};
+use unispine::train::{self, Event, Method, RunDir, TrainOverrides, Trainer};
 mod common;
 use common::tiny;
 
@@ -216,7 +217,7 @@ fn run_in(
         stop: &never,
         stop_after,
     };
-    pool.install(|| train::run_with(cfg, &ds, Some(dir), ctl, &mut quiet))
+    pool.install(|| session::run(&cfg.clone().into(), &ds, Some(dir), ctl, &mut quiet))
         .unwrap()
 }
 
@@ -293,7 +294,7 @@ fn resume_across_the_compaction_gives_the_same_bits() {
             stop: &never,
             stop_after: None,
         };
-        let r = train::resume(d.path(), &ds, ctl, &mut quiet).unwrap();
+        let r = session::resume(d.path(), &ds, ctl, &mut quiet).unwrap();
         assert_eq!(
             strip_seconds(&r),
             strip_seconds(&straight),

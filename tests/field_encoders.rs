@@ -495,7 +495,7 @@ fn tensorf_presets_follow_the_upstream_config() {
         (512, 128, 15_000)
     );
     assert!(unispine::field::PRESETS.contains(&"tensorf"));
-    assert!(unispine::baseline::Baseline::names().contains(&"tensorf-full"));
+    assert!(unispine::method::Baseline::names().contains(&"tensorf-full"));
     // The initial planes are 0.1 N(0, 1): mean ~ 0, standard deviation ~ 0.1.
     let f = Field::<f64>::new(&red).unwrap();
     let (loff, _) = match &f.encoder {

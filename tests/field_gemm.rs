@@ -6,11 +6,11 @@
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use unispine::field::adam::FlatAdam;
 use unispine::field::gemm;
 use unispine::field::render::{self, Ray};
 use unispine::field::train::{loss_and_grad, Sampling, Workspace};
 use unispine::field::{Field, FieldConfig};
+use unispine::optim::FlatAdam;
 use unispine::simd::Simd;
 
 /// Shapes `(rows, inner, cols)`: tile multiples, ragged edges below every tile size, the MLP's.

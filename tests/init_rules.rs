@@ -8,6 +8,8 @@ use unispine::dataset::Dataset;
 use unispine::gaussians::init::{self, InitConfig, InitKind};
 use unispine::volume::Volume;
 
+mod common;
+
 const CENTRE: [f64; 3] = [4.0, -3.0, 2.0];
 const RADIUS: f64 = 6.0;
 
@@ -169,10 +171,7 @@ fn bad_init_settings_exit_1_naming_the_flag_and_value_and_write_nothing() {
         let mut args = vec!["train", "--data", "no-such-dataset", "--out"];
         args.push(out.to_str().unwrap());
         args.extend(&flags);
-        let o = std::process::Command::new(env!("CARGO_BIN_EXE_unispine"))
-            .args(&args)
-            .output()
-            .unwrap();
+        let o = common::cli::bin().args(&args).output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(1), "{flags:?}: {err}");
         for w in words {

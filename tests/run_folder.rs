@@ -8,7 +8,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::atomic::AtomicBool;
 
-use unispine::train::{self, Checkpoint, Control, Event, Method, RunDir, TrainConfig};
+use unispine::session::{self, Control};
+use unispine::train::{Checkpoint, Event, Method, RunDir, TrainConfig};
 mod common;
 use common::tiny;
 
@@ -237,12 +238,26 @@ fn a_stopped_and_resumed_run_gives_the_same_bits() {
         stop: &never,
         stop_after,
     };
-    let straight = train::run_with(&cfg, &ds, Some(a.path()), ctl(None), &mut quiet).unwrap();
+    let straight = session::run(
+        &cfg.clone().into(),
+        &ds,
+        Some(a.path()),
+        ctl(None),
+        &mut quiet,
+    )
+    .unwrap();
     // Stopped at 17: between a reset (15) and a densification (20), statistics half-gathered.
-    let stopped = train::run_with(&cfg, &ds, Some(b.path()), ctl(Some(17)), &mut quiet).unwrap();
+    let stopped = session::run(
+        &cfg.clone().into(),
+        &ds,
+        Some(b.path()),
+        ctl(Some(17)),
+        &mut quiet,
+    )
+    .unwrap();
     assert!(!stopped.completed);
     assert_eq!(stopped.iterations, 17);
-    let resumed = train::resume(b.path(), &ds, ctl(None), &mut quiet).unwrap();
+    let resumed = session::resume(b.path(), &ds, ctl(None), &mut quiet).unwrap();
     assert!(resumed.completed);
     assert_eq!(resumed.evals, straight.evals);
     assert_eq!(resumed.test_psnr, straight.test_psnr);
@@ -360,12 +375,19 @@ fn resume_refuses_another_dataset_an_edited_config_and_a_corrupted_checkpoint() 
         stop: &never,
         stop_after,
     };
-    let stopped = train::run_with(&cfg, &ds, Some(d.path()), ctl(Some(7)), &mut quiet).unwrap();
+    let stopped = session::run(
+        &cfg.clone().into(),
+        &ds,
+        Some(d.path()),
+        ctl(Some(7)),
+        &mut quiet,
+    )
+    .unwrap();
     assert!(!stopped.completed);
     let ckpt = d.path().join("checkpoint.bin");
     let good = std::fs::read(&ckpt).unwrap();
     let refused = |ds: &unispine::dataset::Dataset, words: &[&str]| {
-        let e = train::resume(d.path(), ds, ctl(None), &mut quiet)
+        let e = session::resume(d.path(), ds, ctl(None), &mut quiet)
             .unwrap_err()
             .to_string();
         for w in words {
@@ -401,6 +423,6 @@ fn resume_refuses_another_dataset_an_edited_config_and_a_corrupted_checkpoint() 
     refused(&ds, &["checksum"]);
     // Restored: it resumes and completes.
     std::fs::write(&ckpt, &good).unwrap();
-    let m = train::resume(d.path(), &ds, ctl(None), &mut quiet).unwrap();
+    let m = session::resume(d.path(), &ds, ctl(None), &mut quiet).unwrap();
     assert!(m.completed);
 }

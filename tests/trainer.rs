@@ -10,7 +10,19 @@ use unispine::error::Error;
 use unispine::gaussians::ply;
 use unispine::image2d::Image2d;
 use unispine::render::{self, ColorMode};
-use unispine::train::{self, Event, Method, RunDir, TrainConfig, TrainOverrides, Trainer};
+use unispine::session::{self, Control};
+use unispine::train::{self, Event, Method, Metrics, RunDir, TrainConfig, TrainOverrides, Trainer};
+
+/// A Gaussian run through the session driver, stopped by `stop`.
+fn run_gaussians(
+    c: &TrainConfig,
+    ds: &unispine::dataset::Dataset,
+    out: Option<&std::path::Path>,
+    stop: &AtomicBool,
+    on_event: &mut dyn FnMut(&Event),
+) -> unispine::Result<Metrics> {
+    session::run(&c.clone().into(), ds, out, Control::new(stop), on_event)
+}
 
 use tiny::{dataset, tiny};
 mod common;
@@ -26,7 +38,7 @@ fn loss_decreases_on_a_tiny_dataset() {
         c.spwm_time_scale = 100.0; // SPWM weights active from iteration ~21 on
         let mut losses = Vec::new();
         let stop = AtomicBool::new(false);
-        let m = train::run(&c, &ds, None, &stop, &mut |e: &Event| {
+        let m = run_gaussians(&c, &ds, None, &stop, &mut |e: &Event| {
             if let Event::Progress { loss, .. } = e {
                 losses.push(*loss);
             }
@@ -49,7 +61,7 @@ fn run_in_pool(threads: usize, dir: &Path) -> train::Metrics {
         .num_threads(threads)
         .build()
         .unwrap();
-    pool.install(|| train::run(&c, &ds, Some(dir), &AtomicBool::new(false), &mut quiet))
+    pool.install(|| run_gaussians(&c, &ds, Some(dir), &AtomicBool::new(false), &mut quiet))
         .unwrap()
 }
 
@@ -133,7 +145,7 @@ fn divergence_stops_with_iteration_and_view() {
     c.lr.position_init = 1.0;
     c.lr.position_final = 1.0;
     c.checkpoint_every = 1;
-    let e = train::run(
+    let e = run_gaussians(
         &c,
         &ds,
         Some(dir.path()),
@@ -161,7 +173,7 @@ fn stop_request_writes_a_checkpoint() {
     let dir = tempfile::tempdir().unwrap();
     let c = tiny(Method::Xgaussian, 30);
     let stop = AtomicBool::new(false);
-    let m = train::run(&c, &ds, Some(dir.path()), &stop, &mut |e: &Event| {
+    let m = run_gaussians(&c, &ds, Some(dir.path()), &stop, &mut |e: &Event| {
         if let Event::Progress { iteration: 5, .. } = e {
             stop.store(true, Ordering::SeqCst);
         }
@@ -199,7 +211,7 @@ fn presets_parse_and_round_trip() {
     let x = TrainConfig::preset(Method::Xgaussian);
     assert!(x.spwm.is_none() && x.loss.data_term == unispine::loss::DataTerm::L1);
     // Command line: preset + flag-by-flag overrides, parsed by the library's settings table.
-    let method = unispine::baseline::TrainMethod::parse("3dgs").unwrap();
+    let method = unispine::method::TrainMethod::parse("3dgs").unwrap();
     let m = TrainOverrides::command()
         .try_get_matches_from([
             "train",
@@ -226,8 +238,8 @@ fn presets_parse_and_round_trip() {
     assert!(TrainOverrides::command()
         .try_get_matches_from(["train", "--color", "rgb"])
         .is_err());
-    assert!(unispine::baseline::TrainMethod::parse("rgb").is_err());
-    assert!(unispine::baseline::TrainMethod::parse("fdk")
+    assert!(unispine::method::TrainMethod::parse("rgb").is_err());
+    assert!(unispine::method::TrainMethod::parse("fdk")
         .unwrap()
         .gaussians()
         .is_none());
@@ -238,7 +250,7 @@ fn eval_matches_a_direct_computation() {
     let ds = dataset();
     let dir = tempfile::tempdir().unwrap();
     let c = tiny(Method::Unispine, 20);
-    let m = train::run(
+    let m = run_gaussians(
         &c,
         &ds,
         Some(dir.path()),

@@ -141,7 +141,7 @@ fn time_phases(
     d: &Image2d<f32>,
     reps: usize,
 ) -> crate::Result<RenderPhases> {
-    use crate::field::train::cpu_seconds;
+    use crate::timer::cpu_seconds;
     let now = || (cpu_seconds(libc::CLOCK_PROCESS_CPUTIME_ID), Instant::now());
     let mut ph = RenderPhases::default();
     for _ in 0..reps.max(1) {

@@ -6,15 +6,16 @@
 //! SIGINT / SIGTERM that writes a checkpoint and exits 130 / 143 ([`super::signals`]), and the
 //! run folder described in [`unispine::train::run_dir`].
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{bail, Context};
 
 use super::progress::Progress;
 use super::signals;
-use unispine::baseline::{Baseline, TrainMethod};
 use unispine::error::Error;
-use unispine::train::{self, Control, Event, Method, Metrics, RunDir, TrainOverrides};
+use unispine::method::{Config, TrainMethod};
+use unispine::session::{self, Control};
+use unispine::train::{run_dir, Event, Method, RunDir, TrainOverrides};
 
 /// Arguments of `unispine train`.
 #[derive(Debug, clap::Args)]
@@ -69,116 +70,71 @@ pub fn init_threads(threads: Option<usize>) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Run `unispine train`.
+/// Run `unispine train`: flags -> a [`Config`] (or the run to resume), then
+/// [`unispine::session`] with events -> progress output.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
-    if let (Some(run), TrainMethod::Gaussians(Method::Unispine)) = (&args.resume, &args.method) {
-        if RunDir::open(run)?.is_field_run()? {
-            return resume_field(run, &args);
-        }
-    }
-    let method = match args.method {
-        TrainMethod::Gaussians(m) => m,
-        TrainMethod::Baseline(b) => return run_baseline(b, &args),
-    };
-    unispine::baseline::check_vm_lines(method.name(), args.baseline.vm_lines)?;
     init_threads(args.threads)?;
-    if args.resume.is_some() && method != Method::Unispine {
-        bail!("--method cannot be combined with --resume (the run's config.json is used)");
-    }
-    let (cfg, ds, out) = match &args.resume {
+    let (cfg, data, out) = match &args.resume {
         Some(run) => {
-            let rd = RunDir::open(run)?;
-            rd.check_resumable()?;
-            let cfg: train::TrainConfig = rd.read_config()?;
-            let data = match (&args.data, rd.dataset_path()?) {
+            if args.method != TrainMethod::Gaussians(Method::Unispine)
+                || args.baseline.vm_lines.is_some()
+                || args.baseline.rays.is_some()
+            {
+                bail!("--resume continues the run with its own config.json: give only --data and --threads");
+            }
+            let data = match (&args.data, RunDir::open(run)?.dataset_path()?) {
                 (Some(d), _) => d.clone(),
                 (None, Some(d)) => d,
-                (None, None) => bail!("the run's config.json names no dataset: pass --data"),
+                (None, None) => bail!(
+                    "invalid `--data`: {} records no dataset; give --data",
+                    run.display()
+                ),
             };
-            let ds = unispine::dataset::store::load(&data)?;
-            (cfg, ds, run.clone())
+            (None, data, run.clone())
         }
         None => {
             let (Some(data), Some(out)) = (&args.data, &args.out) else {
                 bail!("--data and --out are required (or --resume RUN)");
             };
-            let mut cfg = args.overrides.apply(method, args.iters)?;
-            // Absolute, so that `eval --run` and `--resume` work from any folder.
-            let abs = data
-                .canonicalize()
-                .with_context(|| format!("--data {}", data.display()))?;
-            cfg.data = Some(abs.display().to_string());
-            let ds = unispine::dataset::store::load(data)?;
-            (cfg, ds, out.clone())
+            (Some(config(&args, data)?), data.clone(), out.clone())
         }
     };
-    signals::install()?;
+    let ds = unispine::dataset::store::load(&data)?;
+    let cfg = match cfg {
+        Some(Pending::Ready(c)) => Some(*c),
+        Some(Pending::Baseline(b, opts)) => {
+            Some(Config::baseline(b, ds.train.angles.len(), &opts)?)
+        }
+        None => None,
+    };
+    // FDK is one pass and keeps the default signal behaviour.
+    if cfg != Some(Config::Fdk) {
+        signals::install()?;
+    }
     eprintln!(
-        "{} `{}` for {} iterations -> {}",
-        if args.resume.is_some() {
-            "resuming"
-        } else {
-            "training"
+        "{} `{}` on {} -> {}",
+        if cfg.is_some() { "running" } else { "resuming" },
+        match &cfg {
+            Some(c) => c.name().to_string(),
+            None => Config::read(&RunDir::open(&out)?)?.name().to_string(),
         },
-        cfg.method.name(),
-        cfg.total_iterations(),
+        data.display(),
         out.display()
     );
     let mut bar: Option<Progress> = None;
-    let mut on_event = |e: &Event| match e {
-        Event::Started {
-            n_gaussians,
-            train_views,
-            test_views,
-            extent,
-            ..
-        } => {
-            eprintln!(
-                "{n_gaussians} initial Gaussians, {train_views} training / {test_views} test views, \
-                 scene extent {extent:.1} mm"
-            );
-        }
-        Event::Progress {
-            iteration,
-            total,
-            loss,
-            psnr,
-            n_gaussians,
-            its_per_sec,
-        } => {
-            // Created at the first iteration of this session, so that a resumed run counts
-            // from the iteration it resumed at.
-            let b = bar.get_or_insert_with(|| {
-                Progress::starting_at("train", *total as u64, (*iteration - 1) as u64)
-            });
-            b.inc(
-                1,
-                &format!("loss {loss:.4} psnr {psnr:.2} dB N {n_gaussians} {its_per_sec:.1} it/s"),
-            );
-        }
-        Event::Eval {
-            iteration,
-            psnr,
-            ssim,
-            n_gaussians,
-        } => eprintln!(
-            "\n[test @ {iteration}] PSNR {psnr:.3} dB  SSIM {ssim:.4}  ({n_gaussians} Gaussians)"
-        ),
-        Event::Stopped { iteration } => eprintln!("\nstopped after iteration {iteration}"),
-        _ => {}
-    };
+    let mut on_event = |e: &Event| show(e, &mut bar);
     let ctl = Control {
         stop: &signals::STOP,
         stop_after: args.stop_after,
     };
-    let m = match &args.resume {
-        Some(run) => train::resume(run, &ds, ctl, &mut on_event),
-        None => train::run_with(&cfg, &ds, Some(&out), ctl, &mut on_event),
+    let m = match &cfg {
+        Some(c) => session::run(c, &ds, Some(&out), ctl, &mut on_event),
+        None => session::resume(&out, &ds, ctl, &mut on_event),
     };
     if let Some(b) = bar.take() {
         b.finish("");
     }
-    let ckpt = out.join(train::run_dir::CHECKPOINT);
+    let ckpt = out.join(run_dir::CHECKPOINT);
     let m = match m {
         Ok(m) => m,
         // Only a divergence has a last good state worth naming, and only when it was written.
@@ -207,12 +163,16 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     }
+    let gaussians = if m.n_gaussians > 0 {
+        format!("{} Gaussians, ", m.n_gaussians)
+    } else {
+        String::new()
+    };
     println!(
-        "{}: test PSNR {:.3} dB, SSIM {:.4}, {} Gaussians, train time {:.1} s, render {:.1} fps",
-        cfg.method.name(),
+        "{}: test PSNR {:.3} dB, SSIM {:.4}, {gaussians}train time {:.2} s, render {:.2} fps",
+        m.method,
         m.test_psnr.unwrap_or(f64::NAN),
         m.test_ssim.unwrap_or(f64::NAN),
-        m.n_gaussians,
         m.train_time_s,
         m.render_fps.unwrap_or(f64::NAN)
     );
@@ -230,6 +190,105 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     }
     println!("outputs: {}", out.display());
     Ok(())
+}
+
+/// A new run's settings from the flags: complete for the Gaussians, the options of a baseline
+/// (completed once the dataset is loaded: a field preset's schedule is in epochs of its
+/// training views).
+enum Pending {
+    Ready(Box<Config>),
+    Baseline(
+        unispine::method::Baseline,
+        unispine::baseline::BaselineOptions,
+    ),
+}
+
+fn config(args: &TrainArgs, data: &std::path::Path) -> anyhow::Result<Pending> {
+    match args.method {
+        TrainMethod::Gaussians(method) => {
+            unispine::baseline::check_vm_lines(method.name(), args.baseline.vm_lines)?;
+            if args.baseline.rays.is_some() {
+                bail!(
+                    "invalid `--rays`: only for the neural-field baselines, not `{}`",
+                    method.name()
+                );
+            }
+            let mut cfg = args.overrides.apply(method, args.iters)?;
+            // Absolute, so that `eval --run` and `--resume` work from any folder.
+            let abs = data
+                .canonicalize()
+                .with_context(|| format!("--data {}", data.display()))?;
+            cfg.data = Some(abs.display().to_string());
+            Ok(Pending::Ready(Box::new(Config::Gaussians(cfg))))
+        }
+        TrainMethod::Baseline(b) => {
+            if let Some(flag) = args
+                .overrides
+                .given()
+                .into_iter()
+                .find(|f| !unispine::baseline::FLAGS.contains(&&f[2..]))
+            {
+                bail!(
+                    "invalid `{flag}`: a setting of the Gaussian trainer; `{}` takes only --{}",
+                    b.name(),
+                    unispine::baseline::FLAGS.join(", --")
+                );
+            }
+            let opts = unispine::baseline::BaselineOptions {
+                iters: args.iters,
+                seed: args.overrides.seed,
+                vm_lines: args.baseline.vm_lines,
+                rays: args.baseline.rays,
+            };
+            Ok(Pending::Baseline(b, opts))
+        }
+    }
+}
+
+/// The terminal output of a training event: a line at the start and at each evaluation, a
+/// progress bar over the iterations (created at the first iteration of this session, so that
+/// a resumed run counts from the iteration it resumed at).
+fn show(e: &Event, bar: &mut Option<Progress>) {
+    match e {
+        Event::Started {
+            n_gaussians,
+            train_views,
+            test_views,
+            extent,
+            ..
+        } => eprintln!(
+            "{n_gaussians} initial Gaussians, {train_views} training / {test_views} test views, \
+             scene extent {extent:.1} mm"
+        ),
+        Event::Progress {
+            iteration,
+            total,
+            loss,
+            psnr,
+            n_gaussians,
+            its_per_sec,
+        } => {
+            let b = bar.get_or_insert_with(|| {
+                Progress::starting_at("train", *total as u64, (*iteration - 1) as u64)
+            });
+            let msg = if *n_gaussians > 0 {
+                format!("loss {loss:.4} psnr {psnr:.2} dB N {n_gaussians} {its_per_sec:.1} it/s")
+            } else {
+                format!("loss {loss:.3e} {its_per_sec:.1} it/s")
+            };
+            b.inc(1, &msg);
+        }
+        Event::Eval {
+            iteration,
+            psnr,
+            ssim,
+            n_gaussians,
+        } => eprintln!(
+            "\n[test @ {iteration}] PSNR {psnr:.3} dB  SSIM {ssim:.4}  ({n_gaussians} Gaussians)"
+        ),
+        Event::Stopped { iteration } => eprintln!("\nstopped after iteration {iteration}"),
+        _ => {}
+    }
 }
 
 /// The `--method` parser over the library's list of methods ([`TrainMethod`]): its error
@@ -267,154 +326,4 @@ impl clap::builder::TypedValueParser for MethodParser {
             },
         )))
     }
-}
-
-/// `unispine train --method BASELINE`: the baseline's own trainer, the same run folder,
-/// `--threads` as for the Gaussians.
-/// Ctrl-C / SIGTERM stop a field run after the current iteration without evaluation (with a
-/// checkpoint) and exit 130 / 143.
-fn run_baseline(b: Baseline, args: &TrainArgs) -> anyhow::Result<()> {
-    let Some(data) = args.data.as_ref() else {
-        bail!("invalid `--data`: a baseline needs a dataset folder");
-    };
-    if args.resume.is_some() {
-        bail!("--method cannot be combined with --resume (the run's config.json is used)");
-    }
-    let Some(out) = args.out.as_ref() else {
-        bail!("invalid `--out`: a baseline needs a run folder");
-    };
-    if let Some(flag) = args
-        .overrides
-        .given()
-        .into_iter()
-        .find(|f| !unispine::baseline::FLAGS.contains(&&f[2..]))
-    {
-        bail!(
-            "invalid `{flag}`: a setting of the Gaussian trainer; `{}` takes only --{}",
-            b.name(),
-            unispine::baseline::FLAGS.join(", --")
-        );
-    }
-    let opts = unispine::baseline::BaselineOptions {
-        iters: args.iters,
-        seed: args.overrides.seed,
-        vm_lines: args.baseline.vm_lines,
-        rays: args.baseline.rays,
-        stop_after: args.stop_after,
-    };
-    // FDK is one pass and keeps the default signal behaviour.
-    let field = matches!(b, Baseline::Field(_));
-    drive_baseline(
-        &format!("running `{}`", b.name()),
-        data,
-        out,
-        field,
-        args.threads,
-        |ds, on_event| unispine::baseline::run(b, ds, Some(out), opts, &signals::STOP, on_event),
-    )
-}
-
-/// `unispine train --resume RUN` of a stopped neural-field run (`--data`: default the dataset
-/// recorded in its `config.json`).
-fn resume_field(run: &Path, args: &TrainArgs) -> anyhow::Result<()> {
-    if args.out.is_some()
-        || args.iters.is_some()
-        || args.baseline.vm_lines.is_some()
-        || args.baseline.rays.is_some()
-        || !args.overrides.given().is_empty()
-    {
-        bail!(
-            "--resume continues the run with its own config.json: give only --data and --threads"
-        );
-    }
-    let rd = RunDir::open(run)?;
-    let data = match (&args.data, rd.dataset_path()?) {
-        (Some(d), _) => d.clone(),
-        (None, Some(d)) => d,
-        (None, None) => bail!(
-            "invalid `--data`: {} records no dataset; give --data",
-            run.display()
-        ),
-    };
-    let v: serde_json::Value = rd.read_config()?;
-    let name = v
-        .get("preset")
-        .and_then(|p| p.as_str())
-        .unwrap_or("field")
-        .to_string();
-    drive_baseline(
-        &format!("resuming `{name}`"),
-        &data,
-        run,
-        true,
-        args.threads,
-        |ds, on_event| {
-            unispine::baseline::resume(run, ds, &signals::STOP, args.stop_after, on_event)
-        },
-    )
-}
-
-/// Load the dataset, print `headline`, run `go` with a progress bar, report (a stopped
-/// field run exits 130 / 143 after naming its checkpoint).
-fn drive_baseline(
-    headline: &str,
-    data: &Path,
-    out: &Path,
-    field: bool,
-    threads: Option<usize>,
-    go: impl FnOnce(
-        &unispine::dataset::Dataset,
-        &mut dyn FnMut(&Event),
-    ) -> unispine::error::Result<Metrics>,
-) -> anyhow::Result<()> {
-    let ds = unispine::dataset::store::load(data)?;
-    init_threads(threads)?;
-    if field {
-        signals::install()?;
-    }
-    eprintln!("{headline} on {} -> {}", data.display(), out.display());
-    let mut bar: Option<Progress> = None;
-    let mut on_event = |e: &Event| {
-        if let Event::Progress {
-            iteration,
-            total,
-            loss,
-            its_per_sec,
-            ..
-        } = e
-        {
-            let b = bar.get_or_insert_with(|| {
-                Progress::starting_at("train", *total as u64, (*iteration - 1) as u64)
-            });
-            b.inc(1, &format!("loss {loss:.3e} {its_per_sec:.1} it/s"));
-        }
-    };
-    let m = go(&ds, &mut on_event);
-    if let Some(b) = bar.take() {
-        b.finish("");
-    }
-    let m = m?;
-    if !m.completed {
-        println!(
-            "stopped at iteration {}; model, metrics.json and checkpoint.bin written to {} \
-             (continue with `unispine train --resume {}`)",
-            m.iterations,
-            out.display(),
-            out.display()
-        );
-        if let Some(code) = signals::exit_code() {
-            std::process::exit(code);
-        }
-        return Ok(());
-    }
-    println!(
-        "{}: test PSNR {:.3} dB, SSIM {:.4}, train time {:.2} s, render {:.2} fps",
-        m.method,
-        m.test_psnr.unwrap_or(f64::NAN),
-        m.test_ssim.unwrap_or(f64::NAN),
-        m.train_time_s,
-        m.render_fps.unwrap_or(f64::NAN)
-    );
-    println!("outputs: {}", out.display());
-    Ok(())
 }

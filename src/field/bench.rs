@@ -14,14 +14,15 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use super::adam::FlatAdam;
 use super::mlp::Cache;
 use super::render::{self, Ray};
-use super::train::{cpu_seconds, Sampling, StageTimes, Workspace, RAYS_PER_BLOCK};
+use super::train::{Sampling, StageTimes, Workspace, RAYS_PER_BLOCK};
 use super::{Field, FieldConfig};
 use crate::audit::bench::bench_geometry;
 use crate::error::Result;
+use crate::optim::FlatAdam;
 use crate::simd::Simd;
+use crate::timer::cpu_seconds;
 
 /// Wall and process CPU seconds of `f`.
 pub fn timed<T>(f: impl FnOnce() -> T) -> (T, f64, f64) {

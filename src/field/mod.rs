@@ -4,7 +4,7 @@
 //!
 //! Stages (one file each, forward and backward): [`encode`] (frequency, hash grid, TensoRF VM,
 //! dense grid), [`mlp`] (its matrix products in [`gemm`]), [`render`] (rays, stratified
-//! samples, line integral), [`adam`] (PyTorch Adam over a flat vector), [`train`] (the loop,
+//! samples, line integral), [`train`] (the loop with [`crate::optim::FlatAdam`],
 //! evaluation, model file); [`bench`] times them. Generic over [`Real`]: f32 to train, f64 for
 //! the gradient checks.
 //!
@@ -28,14 +28,12 @@
 //! [`mlp`]: crate::field::mlp
 //! [`gemm`]: crate::field::gemm
 //! [`render`]: crate::field::render
-//! [`adam`]: crate::field::adam
 //! [`train`]: crate::field::train
 //! [`bench`]: crate::field::bench
 //! [`FieldConfig::preset`]: crate::field::FieldConfig::preset
 //! [`Real`]: crate::real::Real
 
 pub mod act;
-pub mod adam;
 pub mod bench;
 pub mod checkpoint;
 pub mod encode;

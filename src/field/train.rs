@@ -25,7 +25,6 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use super::adam::FlatAdam;
 use super::checkpoint::FieldCheckpoint;
 use super::mlp::Cache;
 use super::render::{self, Ray, MM};
@@ -34,9 +33,13 @@ use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::geometry::ConeBeam;
 use crate::image2d::Image2d;
+use crate::loss::LossValue;
 use crate::optim::schedule::StepLr;
+use crate::optim::FlatAdam;
 use crate::real::Real;
+use crate::record::{Step, Terms};
 use crate::simd::Simd;
+use crate::timer::ThreadClock;
 
 /// Rays per parallel block.
 pub const RAYS_PER_BLOCK: usize = 8;
@@ -175,7 +178,7 @@ impl<R: Real> Workspace<R> {
                 let mut guard = crate::par::lock(&scratch[slot]);
                 let s = &mut *guard;
                 let n = pts.len();
-                let mut clock = Clock::new(times.is_some());
+                let mut clock = ThreadClock::new(times.is_some());
                 s.delta.resize(n, R::zero());
                 for (j, ray) in chunk.iter().enumerate() {
                     let mut rng = jitter(bi * RAYS_PER_BLOCK + j);
@@ -257,42 +260,6 @@ pub struct StageTimes {
     pub encode_backward: f64,
 }
 
-/// A stopwatch of the calling thread's CPU time (so that other processes on a shared machine
-/// do not inflate it), read only when enabled.
-struct Clock(Option<f64>);
-
-impl Clock {
-    fn new(on: bool) -> Self {
-        Clock(on.then(|| cpu_seconds(libc::CLOCK_THREAD_CPUTIME_ID)))
-    }
-    /// Seconds since the last lap (0 when disabled), restarting.
-    fn lap(&mut self) -> f64 {
-        match &mut self.0 {
-            Some(t) => {
-                let now = cpu_seconds(libc::CLOCK_THREAD_CPUTIME_ID);
-                let d = now - *t;
-                *t = now;
-                d
-            }
-            None => 0.0,
-        }
-    }
-}
-
-/// CPU seconds of the clock `id` (`CLOCK_THREAD_CPUTIME_ID`, `CLOCK_PROCESS_CPUTIME_ID`); NaN
-/// when the OS does not tell.
-pub fn cpu_seconds(id: libc::clockid_t) -> f64 {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: `ts` is a valid timespec to write to.
-    if unsafe { libc::clock_gettime(id, &mut ts) } != 0 {
-        return f64::NAN;
-    }
-    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
-}
-
 /// Line integrals (metres x normalised value) along `rays`, sampled as `sampling` says.
 pub fn render_rays<R: Real>(field: &Field<R>, rays: &[Ray], sampling: &Sampling<'_>) -> Vec<R> {
     let (n_samples, (near, far)) = (sampling.n_samples, sampling.near_far);
@@ -358,15 +325,6 @@ pub fn render_view(
         h,
         acc.iter().map(|&a| (a as f64 * scale) as f32).collect(),
     )
-}
-
-/// Per-iteration figures.
-#[derive(Clone, Debug, PartialEq)]
-pub struct FieldStep {
-    pub iteration: usize,
-    pub view: usize,
-    pub loss: f64,
-    pub lr: f64,
 }
 
 /// The training state.
@@ -460,7 +418,7 @@ impl<'a> FieldTrainer<'a> {
     }
 
     /// Run iteration `self.iteration + 1`.
-    pub fn step(&mut self) -> Result<FieldStep> {
+    pub fn step(&mut self) -> Result<Step> {
         let it = self.iteration + 1;
         let (view, rays, targets) = self.batch(it);
         let seed = self.cfg.seed;
@@ -493,11 +451,21 @@ impl<'a> FieldTrainer<'a> {
             return Err(diverged(format!("parameter {i} became non-finite")));
         }
         self.iteration = it;
-        Ok(FieldStep {
+        Ok(Step {
             iteration: it,
             view,
-            loss,
+            loss: LossValue {
+                total: loss,
+                data: loss,
+                ssim: 0.0,
+            },
+            terms: Terms::Loss,
+            // 10 log10(1 / loss), the loss in (metres x normalised value)^2.
+            psnr: -10.0 * loss.max(1e-30).log10(),
             lr,
+            n_gaussians: 0,
+            eval: None,
+            densified: None,
         })
     }
 

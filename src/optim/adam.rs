@@ -81,12 +81,48 @@ struct Consts<R: Real> {
     eps: R,
 }
 
+/// The order of the last multiply and divide of an Adam update (the two round differently).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Form {
+    /// `p - step_size * (m / denom)`: torch's `param.addcdiv_(exp_avg, denom, value=-step_size)`
+    /// (the Gaussians).
+    Addcdiv,
+    /// `p - (step_size * m) / denom` (the neural fields; their runs and goldens were made with
+    /// this order).
+    ScaledMoment,
+}
+
+impl<R: Real> Consts<R> {
+    /// The constants of step `t` (1-based) with learning rate `lr`: the bias corrections in
+    /// f64, rounded once.
+    fn new(cfg: &AdamConfig, t: u64, lr: f64, on: bool) -> Self {
+        let t = t as i32;
+        let bc1 = 1.0 - cfg.beta1.powi(t);
+        let bc2 = 1.0 - cfg.beta2.powi(t);
+        Consts {
+            on,
+            b1: R::c(cfg.beta1),
+            b2: R::c(cfg.beta2),
+            omb1: R::c(1.0 - cfg.beta1),
+            omb2: R::c(1.0 - cfg.beta2),
+            step_size: R::c(lr / bc1),
+            bc2_sqrt: R::c(bc2.sqrt()),
+            eps: R::c(cfg.eps),
+        }
+    }
+}
+
+/// The update of one element ([`Form::ScaledMoment`] when `SCALED`, else [`Form::Addcdiv`]).
 #[inline(always)]
-fn upd<R: Real>(c: &Consts<R>, p: &mut R, m: &mut R, v: &mut R, g: R) {
+fn upd<R: Real, const SCALED: bool>(c: &Consts<R>, p: &mut R, m: &mut R, v: &mut R, g: R) {
     *m = c.b1 * *m + c.omb1 * g;
     *v = c.b2 * *v + c.omb2 * g * g;
     let denom = v.sqrt() / c.bc2_sqrt + c.eps;
-    *p -= c.step_size * (*m / denom);
+    if SCALED {
+        *p -= c.step_size * *m / denom;
+    } else {
+        *p -= c.step_size * (*m / denom);
+    }
 }
 
 /// Adam update of elements `range` of every row of a chunk of an array-valued group.
@@ -101,7 +137,7 @@ fn rows_kernel<R: Real, const N: usize>(
 ) {
     for j in 0..pc.len() {
         for a in range.clone() {
-            upd(c, &mut pc[j][a], &mut mc[j][a], &mut vc[j][a], gc[j][a]);
+            upd::<R, false>(c, &mut pc[j][a], &mut mc[j][a], &mut vc[j][a], gc[j][a]);
         }
     }
 }
@@ -109,9 +145,15 @@ fn rows_kernel<R: Real, const N: usize>(
 /// Adam update of every element of a chunk of a contiguous group (each element independent,
 /// so the loop vectorises across elements).
 #[inline(always)]
-fn flat_kernel<R: Real>(c: &Consts<R>, pc: &mut [R], mc: &mut [R], vc: &mut [R], gc: &[R]) {
+fn flat_kernel<R: Real, const SCALED: bool>(
+    c: &Consts<R>,
+    pc: &mut [R],
+    mc: &mut [R],
+    vc: &mut [R],
+    gc: &[R],
+) {
     for (((p, m), v), &g) in pc.iter_mut().zip(mc.iter_mut()).zip(vc.iter_mut()).zip(gc) {
-        upd(c, p, m, v, g);
+        upd::<R, SCALED>(c, p, m, v, g);
     }
 }
 
@@ -173,7 +215,7 @@ fn mixed_rows_kernel<R: Real, const N: usize>(
 ) {
     for (((p, m), v), g) in pc.iter_mut().zip(mc.iter_mut()).zip(vc.iter_mut()).zip(gc) {
         for a in 0..N {
-            upd(&c.lane(a), &mut p[a], &mut m[a], &mut v[a], g[a]);
+            upd::<R, false>(&c.lane(a), &mut p[a], &mut m[a], &mut v[a], g[a]);
         }
     }
 }
@@ -245,9 +287,15 @@ crate::simd::wide_kernels! {
 }
 
 crate::simd::wide_kernels! {
-    unsafe fn [R: Real](c: &Consts<R>, pc: &mut [R], mc: &mut [R], vc: &mut [R], gc: &[R]);
-    flat_kernel_avx2 => { flat_kernel(c, pc, mc, vc, gc) }
-    flat_kernel_avx512 => { flat_kernel(c, pc, mc, vc, gc) }
+    unsafe fn [R: Real, const SCALED: bool](
+        c: &Consts<R>,
+        pc: &mut [R],
+        mc: &mut [R],
+        vc: &mut [R],
+        gc: &[R],
+    );
+    flat_kernel_avx2 => { flat_kernel::<R, SCALED>(c, pc, mc, vc, gc) }
+    flat_kernel_avx512 => { flat_kernel::<R, SCALED>(c, pc, mc, vc, gc) }
 }
 
 /// Adam update of elements `range` of every row of one array-valued group, with the
@@ -268,6 +316,7 @@ fn group_step<R: Real, const N: usize>(
     if range == (0..N) {
         return flat_step(
             simd,
+            Form::Addcdiv,
             c,
             p.as_flattened_mut(),
             m.as_flattened_mut(),
@@ -288,19 +337,85 @@ fn group_step<R: Real, const N: usize>(
     });
 }
 
-/// Adam update of every element of a flat group with the instruction set `simd` (supported).
-fn flat_step<R: Real>(simd: Simd, c: &Consts<R>, p: &mut [R], m: &mut [R], v: &mut [R], g: &[R]) {
+/// Adam update of every element of a flat group with the instruction set `simd` (supported)
+/// in the order `form`.
+fn flat_step<R: Real>(
+    simd: Simd,
+    form: Form,
+    c: &Consts<R>,
+    p: &mut [R],
+    m: &mut [R],
+    v: &mut [R],
+    g: &[R],
+) {
+    match form {
+        Form::Addcdiv => flat_step_as::<R, false>(simd, c, p, m, v, g),
+        Form::ScaledMoment => flat_step_as::<R, true>(simd, c, p, m, v, g),
+    }
+}
+
+/// [`flat_step`] in the order `SCALED` ([`upd`]).
+fn flat_step_as<R: Real, const SCALED: bool>(
+    simd: Simd,
+    c: &Consts<R>,
+    p: &mut [R],
+    m: &mut [R],
+    v: &mut [R],
+    g: &[R],
+) {
     if !c.on {
         return;
     }
     par_chunks4(p, m, v, g, |pc, mc, vc, gc| match simd {
         // SAFETY: the caller passes a supported instruction set.
         #[cfg(target_arch = "x86_64")]
-        Simd::Avx512 => unsafe { flat_kernel_avx512(c, pc, mc, vc, gc) },
+        Simd::Avx512 => unsafe { flat_kernel_avx512::<R, SCALED>(c, pc, mc, vc, gc) },
         #[cfg(target_arch = "x86_64")]
-        Simd::Avx2 => unsafe { flat_kernel_avx2(c, pc, mc, vc, gc) },
-        _ => flat_kernel(c, pc, mc, vc, gc),
+        Simd::Avx2 => unsafe { flat_kernel_avx2::<R, SCALED>(c, pc, mc, vc, gc) },
+        _ => flat_kernel::<R, SCALED>(c, pc, mc, vc, gc),
     });
+}
+
+/// Adam over one flat parameter vector with a single step count, as `torch.optim.Adam`
+/// (single-tensor, non-capturable, no weight decay) over one tensor: the same kernel as
+/// [`Adam`] in the order [`Form::ScaledMoment`]. The neural fields' optimiser (PyTorch defaults:
+/// betas (0.9, 0.999), eps 1e-8).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FlatAdam<R: Real> {
+    pub cfg: AdamConfig,
+    pub m: Vec<R>,
+    pub v: Vec<R>,
+    pub step: u64,
+}
+
+impl<R: Real> FlatAdam<R> {
+    /// Zero moments for `n` parameters, PyTorch's defaults.
+    pub fn new(n: usize) -> Self {
+        FlatAdam {
+            cfg: AdamConfig {
+                beta1: 0.9,
+                beta2: 0.999,
+                eps: 1e-8,
+            },
+            m: vec![R::zero(); n],
+            v: vec![R::zero(); n],
+            step: 0,
+        }
+    }
+
+    /// One step with learning rate `lr` on the widest supported instruction set (every path
+    /// gives the same bits: each element does the same operations; parallel over fixed chunks,
+    /// so the same bits for any thread count).
+    pub fn update(&mut self, p: &mut [R], g: &[R], lr: f64) {
+        assert!(
+            g.len() == p.len() && self.m.len() == p.len() && self.v.len() == p.len(),
+            "FlatAdam: parameter, gradient and moment lengths differ"
+        );
+        self.step += 1;
+        let c = Consts::new(&self.cfg, self.step, lr, true);
+        let simd = Simd::active().or_narrower();
+        flat_step(simd, Form::ScaledMoment, &c, p, &mut self.m, &mut self.v, g);
+    }
 }
 
 impl<R: Real> Adam<R> {
@@ -315,20 +430,7 @@ impl<R: Real> Adam<R> {
     }
 
     fn consts(&self, g: usize, lr: f64, on: bool) -> Consts<R> {
-        let t = (self.steps[g] + 1) as i32;
-        let c = &self.cfg;
-        let bc1 = 1.0 - c.beta1.powi(t);
-        let bc2 = 1.0 - c.beta2.powi(t);
-        Consts {
-            on,
-            b1: R::c(c.beta1),
-            b2: R::c(c.beta2),
-            omb1: R::c(1.0 - c.beta1),
-            omb2: R::c(1.0 - c.beta2),
-            step_size: R::c(lr / bc1),
-            bc2_sqrt: R::c(bc2.sqrt()),
-            eps: R::c(c.eps),
-        }
+        Consts::new(&self.cfg, self.steps[g] + 1, lr, on)
     }
 
     /// One Adam step of the groups with `active[g] == true`, learning rates `lr`.
@@ -390,7 +492,7 @@ impl<R: Real> Adam<R> {
             &mut m.opacity_logits,
             &mut v.opacity_logits,
         );
-        flat_step(simd, ko, po, mo, vo, &grad.opacity_logits);
+        flat_step(simd, Form::Addcdiv, ko, po, mo, vo, &grad.opacity_logits);
         let kd = &k[Group::FDc as usize];
         let (pf, mf, vf) = (&mut p.features, &mut m.features, &mut v.features);
         let kf = &k[Group::FRest as usize];

@@ -421,7 +421,7 @@ pub fn tables_md(
                 .and_then(|p| verdict::paper_row(p, base))
                 .map(|p| format!("{:.2} / {:.4} / {:.0}", p.psnr, p.ssim, p.train_time_s))
                 .unwrap_or_default();
-            let gaussians = if crate::baseline::Baseline::parse(base).is_some() {
+            let gaussians = if crate::method::Baseline::parse(base).is_some() {
                 "-".to_string()
             } else {
                 pm(&vals(rs, |r| r.n_gaussians.map(|x| x as f64)), 0)
@@ -452,8 +452,7 @@ pub fn tables_md(
         );
     }
     s.push_str(&super::holds::describe_conditions(plan));
-    let base_of =
-        |m: &crate::reproduce::plan::MethodSpec| crate::baseline::Baseline::parse(&m.base);
+    let base_of = |m: &crate::reproduce::plan::MethodSpec| crate::method::Baseline::parse(&m.base);
     if plan.methods.iter().any(|m| base_of(m).is_none()) {
         let _ = writeln!(
             s,
@@ -479,12 +478,12 @@ pub fn tables_md(
     if plan
         .methods
         .iter()
-        .any(|m| matches!(base_of(m), Some(crate::baseline::Baseline::Field(_))))
+        .any(|m| matches!(base_of(m), Some(crate::method::Baseline::Field(_))))
     {
         let fdk = plan
             .methods
             .iter()
-            .any(|m| base_of(m) == Some(crate::baseline::Baseline::Fdk));
+            .any(|m| base_of(m) == Some(crate::method::Baseline::Fdk));
         let _ = writeln!(
             s,
             "\nEvery neural-field cell: {}{}.",

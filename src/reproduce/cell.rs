@@ -72,16 +72,16 @@ impl Cell {
     }
     /// `unispine train` arguments of this cell except `--data`, `--out` and `--threads`.
     pub fn train_args(&self, plan: &Plan) -> Vec<String> {
-        let baseline = crate::baseline::Baseline::parse(&self.method.base);
+        let baseline = crate::method::Baseline::parse(&self.method.base);
         let mut a = vec!["--method".to_string(), self.method.base.clone()];
         match baseline {
             None => a.extend(["--iters".into(), self.iters(plan).to_string()]),
-            Some(crate::baseline::Baseline::Field(_)) => {
+            Some(crate::method::Baseline::Field(_)) => {
                 if let Some(n) = plan.field_iters {
                     a.extend(["--iters".into(), n.to_string()]);
                 }
             }
-            Some(crate::baseline::Baseline::Fdk) => {}
+            Some(crate::method::Baseline::Fdk) => {}
         }
         a.extend(["--seed".into(), self.seed.to_string()]);
         if plan.compress_schedule && baseline.is_none() {

@@ -1,5 +1,6 @@
-//! The trainer: method presets ([`config`]) and their settings ([`settings`]), the training loop ([`Trainer`], [`run`]) and its
-//! progress events ([`event`]).
+//! The trainer: method presets ([`config`]) and their settings ([`settings`]), one iteration of the Gaussians ([`Trainer`]) and the
+//! progress events ([`event`]); [`crate::session`] drives it through
+//! [`crate::method`].
 //!
 //! One iteration (1-based `it`), in the order of UniSpine-GS / X-Gaussian `train.py`:
 //! 1. position learning rate from the log-linear schedule at `it`; one more band of features
@@ -32,18 +33,16 @@
 //! (default: the last of `iterations`) with a prune by importance; `finetune` more iterations
 //! follow without densification, statistics or opacity resets.
 //!
-//! The loop with its events and files is [`session`]; the run folder is [`run_dir`], its
+//! The loop with its events and files is [`crate::session`]; the run folder is [`run_dir`], its
 //! resumable state [`checkpoint`]. [`stages`] times the stages of [`Trainer::step`] for
 //! `unispine bench train` (off unless [`Trainer::stages`] is set; it changes no result).
 //!
 //! [`config`]: crate::train::config
 //! [`settings`]: crate::train::settings
 //! [`Trainer`]: crate::train::Trainer
-//! [`run`]: crate::train::run
 //! [`event`]: crate::train::event
 //! [`LEAVE_FACTOR`]: crate::train::LEAVE_FACTOR
 //! [`compact`]: crate::train::compact
-//! [`session`]: crate::train::session
 //! [`run_dir`]: crate::train::run_dir
 //! [`checkpoint`]: crate::train::checkpoint
 //! [`stages`]: crate::train::stages
@@ -55,7 +54,6 @@ pub mod compact;
 pub mod config;
 pub mod event;
 pub mod run_dir;
-pub mod session;
 pub mod settings;
 pub mod stages;
 
@@ -67,17 +65,17 @@ use rand_chacha::ChaCha8Rng;
 use crate::dataset::{targets, Dataset};
 use crate::densify::TrainState;
 use crate::error::{Error, Result};
-use crate::eval::{self, EvalResult};
+use crate::eval;
 use crate::gaussians::init;
 use crate::image2d::Image2d;
 use crate::loss::{self, spwm};
 use crate::optim::{Group, N_GROUPS};
+use crate::record::{Step, StepEval, Terms};
 use crate::render::{self, RenderSettings};
 
 pub use config::{Method, TrainConfig};
 pub use event::{Event, IterRate};
 pub use run_dir::{Checkpoint, EvalPoint, Metrics, RunDir};
-pub use session::{resume, run, run_with, Control};
 pub use settings::TrainOverrides;
 pub use stages::StageTimes;
 
@@ -102,29 +100,6 @@ pub fn scene_extent(ds: &Dataset, views: usize) -> f64 {
 /// A run has diverged when every Gaussian is farther than this many scene extents from the
 /// centre of the volume box.
 pub const LEAVE_FACTOR: f64 = 10.0;
-
-/// What one iteration did.
-#[derive(Clone, Debug, PartialEq)]
-pub struct StepInfo {
-    pub iteration: usize,
-    pub view: usize,
-    pub loss: loss::LossValue,
-    pub psnr: f64,
-    pub n_gaussians: usize,
-    pub eval: Option<StepEval>,
-    pub densified: Option<crate::densify::DensifyReport>,
-}
-
-/// The test evaluation of an iteration: of the model before that iteration's densification
-/// and update (at the last iteration, the model that is saved).
-#[derive(Clone, Debug, PartialEq)]
-pub struct StepEval {
-    pub result: EvalResult,
-    /// Gaussians of the evaluated model.
-    pub n_gaussians: usize,
-    /// Wall time of the evaluation alone (rendering and scoring the test views), seconds.
-    pub seconds: f64,
-}
 
 /// The training loop's state; [`Trainer::step`] runs one iteration.
 pub struct Trainer<'a> {
@@ -321,7 +296,7 @@ impl<'a> Trainer<'a> {
     }
 
     /// Run iteration `self.iteration + 1`.
-    pub fn step(&mut self) -> Result<StepInfo> {
+    pub fn step(&mut self) -> Result<Step> {
         let mut laps = stages::Laps::new(self.stages.is_some());
         let mut t = stages::Recorder::default();
         let it = self.iteration + 1;
@@ -444,11 +419,13 @@ impl<'a> Trainer<'a> {
             t.0.steps = 1;
             s.add(&t.0);
         }
-        Ok(StepInfo {
+        Ok(Step {
             iteration: it,
             view,
             loss: lv,
+            terms: Terms::All,
             psnr,
+            lr: lr[Group::Xyz as usize],
             n_gaussians: self.state.len(),
             eval,
             densified,

@@ -194,19 +194,21 @@ impl RunDir {
     }
 
     /// Whether the folder holds a neural-field run (its `config.json` names a field preset):
-    /// those resume through [`crate::baseline::resume`].
+    /// those resume through [`crate::session::resume`].
     pub fn is_field_run(&self) -> Result<bool> {
         let v: serde_json::Value = self.read_json(CONFIG, "config")?;
         Ok(v.get("preset").is_some_and(|p| p.is_string()))
     }
 
     /// An error when the folder does not hold a Gaussian run to resume: an FDK run (one pass,
-    /// nothing to resume) or a neural-field run (resumed by [`crate::baseline::resume`]),
+    /// nothing to resume) or a neural-field run (resumed by [`crate::session::resume`]),
     /// recognised by its `config.json`.
     pub fn check_resumable(&self) -> Result<()> {
         let v: serde_json::Value = self.read_json(CONFIG, "config")?;
         let why = match (v.get("preset").and_then(|p| p.as_str()), v.get("method")) {
-            (Some(p), _) => format!("a `{p}` neural-field run: resume it with `baseline::resume`"),
+            (Some(p), _) => {
+                format!("a `{p}` neural-field run: resume it with `unispine train --resume`")
+            }
             (None, Some(m)) if m == "fdk" => {
                 "an FDK run: FDK runs in one pass, nothing to resume (train it again with \
                  `unispine train --method fdk`)"

@@ -7,9 +7,7 @@
 //! which other processes on a shared machine do not inflate (it does count the worker threads
 //! of the thread pool while they wait for work).
 
-use std::time::Instant;
-
-use crate::field::train::cpu_seconds;
+pub(crate) use crate::timer::Laps;
 
 /// The stages of one iteration, in the order of [`Stages::seconds`].
 pub const STAGES: [&str; 7] = [
@@ -99,48 +97,6 @@ impl StageTimes {
         self.cpu.add(&one.cpu);
         self.n_densify_events += one.n_densify_events;
         self.steps += one.steps;
-    }
-}
-
-/// A lap clock (wall and process CPU time) that reads the clocks only when `on`.
-pub(crate) struct Laps {
-    last: Option<(Instant, f64)>,
-    start: Option<(Instant, f64)>,
-}
-
-fn now() -> (Instant, f64) {
-    (Instant::now(), cpu_seconds(libc::CLOCK_PROCESS_CPUTIME_ID))
-}
-
-impl Laps {
-    pub(crate) fn new(on: bool) -> Self {
-        let t = on.then(now);
-        Laps { last: t, start: t }
-    }
-
-    /// (wall, CPU) seconds since the previous lap ((0, 0) when off).
-    #[inline]
-    pub(crate) fn lap(&mut self) -> (f64, f64) {
-        match &mut self.last {
-            Some(t) => {
-                let n = now();
-                let d = ((n.0 - t.0).as_secs_f64(), n.1 - t.1);
-                *t = n;
-                d
-            }
-            None => (0.0, 0.0),
-        }
-    }
-
-    /// (wall, CPU) seconds since the clock started ((0, 0) when off).
-    pub(crate) fn total(&self) -> (f64, f64) {
-        match self.start {
-            Some(s) => {
-                let n = now();
-                ((n.0 - s.0).as_secs_f64(), n.1 - s.1)
-            }
-            None => (0.0, 0.0),
-        }
     }
 }
 

@@ -307,9 +307,10 @@ fn parse_one(rc: &Spanned<RawCondition>, cx: &Ctx) -> Result<Condition> {
                 map.insert(f.clone(), Spanned::new(f.span(), toml::Value::Integer(0)));
                 flags_to_args(cx.file, cx.text, &format!("{key}.flag"), &map, cx.schema)?;
                 let baseline = methods.iter().find(|m| {
-                    cx.methods.iter().any(|x| {
-                        &x.name == *m && crate::baseline::Baseline::parse(&x.base).is_some()
-                    }) && !crate::baseline::FLAGS.contains(&k.as_str())
+                    cx.methods
+                        .iter()
+                        .any(|x| &x.name == *m && crate::method::Baseline::parse(&x.base).is_some())
+                        && !crate::baseline::FLAGS.contains(&k.as_str())
                 });
                 if let Some(b) = baseline {
                     return Err(at(
@@ -373,7 +374,7 @@ fn parse_one(rc: &Spanned<RawCondition>, cx: &Ctx) -> Result<Condition> {
                     args.extend(m.args.iter().cloned());
                     args.push(format!("--{flag}"));
                     args.push(a.clone());
-                    if crate::baseline::Baseline::parse(&m.base).is_some() {
+                    if crate::method::Baseline::parse(&m.base).is_some() {
                         continue;
                     }
                     check_train_args(&m.base, &args)

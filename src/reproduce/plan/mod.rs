@@ -329,7 +329,7 @@ impl Plan {
             };
             let section = format!("variants.{vn}");
             let args = flags_to_args(file, text, &section, &flags, schema)?;
-            if crate::baseline::Baseline::parse(&b).is_some() {
+            if crate::method::Baseline::parse(&b).is_some() {
                 if let Some((k, _)) = flags.iter().find(|(k, _)| {
                     !crate::baseline::FLAGS.contains(&k.get_ref().replace('_', "-").as_str())
                 }) {
@@ -557,7 +557,7 @@ impl Plan {
                     ));
                 }
                 if let Some(m) = methods.iter().find(|m| {
-                    crate::baseline::Baseline::parse(&m.base).is_some()
+                    crate::method::Baseline::parse(&m.base).is_some()
                         && !crate::baseline::FLAGS.contains(&flag.as_str())
                 }) {
                     return Err(err_at(

@@ -9,8 +9,8 @@ use toml::Spanned;
 
 use super::err_at;
 use crate::baseline::BaselineFlags;
-use crate::baseline::TrainMethod;
 use crate::error::Result;
+use crate::method::TrainMethod;
 use crate::train::TrainOverrides;
 
 /// The `unispine train` flags a plan cannot set: the harness sets them for every cell.
