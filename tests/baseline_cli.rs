@@ -93,7 +93,7 @@ fn bad_method_settings_are_named() {
         ],
         d,
     );
-    assert_eq!(o.status.code(), Some(2));
+    assert_eq!(o.status.code(), Some(1));
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(
         e.contains("unknown method `fbp`") && e.contains("fdk"),
@@ -276,9 +276,9 @@ fn a_resumed_field_run_has_the_bits_of_one_that_never_stopped() {
         assert!(out.contains("stopped at iteration 12"), "{out}");
         let p = d.join(&part);
         assert!(p.join("checkpoint.bin").is_file());
-        // A setting of the run: clap refuses --iters (usage error), the check --vm-lines.
+        // A setting of the run: clap refuses --iters (a usage error, exit 1), the check --vm-lines.
         let o = unispine(&["train", "--resume", &part, "--iters", "40"], d);
-        assert_eq!(o.status.code(), Some(2), "{m}");
+        assert_eq!(o.status.code(), Some(1), "{m}");
         let o = unispine(&["train", "--resume", &part, "--vm-lines", "corrected"], d);
         assert_eq!(o.status.code(), Some(1), "{m}");
         assert!(String::from_utf8_lossy(&o.stderr).contains("own config.json"));

@@ -372,6 +372,24 @@ fn expected_ranges() -> Vec<(&'static str, Set, Interval, bool)> {
             false,
         ),
         (
+            "init.points",
+            |c, v| c.init.points = v as usize,
+            ge_le(1.0, 5_000_000.0),
+            true,
+        ),
+        (
+            "init.fdk_threshold",
+            |c, v| c.init.fdk_threshold = v,
+            gt_lt(0.0, 1.0),
+            false,
+        ),
+        (
+            "schedule_iterations",
+            |c, v| c.schedule_iterations = v as usize,
+            ge_le(1.0, 1_000_000.0),
+            true,
+        ),
+        (
             "init.intensity",
             |c, v| c.init.intensity = v,
             gt_lt(-inf, inf),

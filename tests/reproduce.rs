@@ -157,10 +157,11 @@ fn a_plan_runs_resumes_and_does_not_depend_on_jobs() {
 fn a_failing_cell_is_recorded_and_the_others_go_on() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    // lambda_dssim = 2 passes the flag parser but not the trainer's config check.
+    // compact_keep = 2 passes the plan's checks (ranged settings) but not the trainer's
+    // compaction check: the cell fails at run time.
     let plan = tiny_plan(
         20,
-        "[variants.broken]\nbase = \"unispine\"\nlambda_dssim = 2.0\n",
+        "[variants.broken]\nbase = \"unispine\"\ncompact_keep = 2.0\n",
     );
     std::fs::write(dir.join("plan.toml"), plan).unwrap();
     let o = reproduce(&["plan.toml", "--out", "r"], dir);
@@ -170,7 +171,7 @@ fn a_failing_cell_is_recorded_and_the_others_go_on() {
     assert_eq!(csv.matches(",failed,false,").count(), 2, "{csv}");
     let md = std::fs::read_to_string(dir.join("r/tables.md")).unwrap();
     assert!(
-        md.contains("runs/ph/broken/seed0`: failed") && md.contains("lambda_dssim"),
+        md.contains("runs/ph/broken/seed0`: failed") && md.contains("compact.keep"),
         "{md}"
     );
 
