@@ -12,11 +12,11 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
-use super::aggregate::{self, Row};
-use super::magnitude::{paper_effect, pooled_effect, Scoped};
+use super::aggregate::Row;
+use super::magnitude::{scopes, Scoped};
 use super::plan::conditions::Condition;
 use super::plan::Plan;
-use super::verdict::{claims_for, evaluate, Claim, Measure};
+use super::verdict::{claims_for, Claim, Measure};
 #[cfg(test)]
 use std::path::Path;
 
@@ -54,32 +54,6 @@ pub fn rows_at(rows: &[Row], c: &Condition, vi: Option<usize>) -> Vec<Row> {
             ..r.clone()
         })
         .collect()
-}
-
-/// A claim's verdicts on `rows` (already at one point): pooled, then per plan dataset.
-fn scopes(plan: &Plan, claim: &Claim, rows: &[Row]) -> Vec<Scoped> {
-    let per: Vec<Scoped> = plan
-        .datasets
-        .iter()
-        .map(|d| {
-            let sub: Vec<Row> = rows
-                .iter()
-                .filter(|r| r.dataset == d.name)
-                .cloned()
-                .collect();
-            let e = d.paper.as_deref().and_then(|p| paper_effect(claim, p));
-            Scoped::new(&d.name, evaluate(claim, &aggregate::observations(&sub)), e)
-        })
-        .collect();
-    let weights: Vec<(usize, Option<f64>)> =
-        per.iter().map(|s| (s.verdict.n, s.paper_effect)).collect();
-    let mut out = vec![Scoped::new(
-        "pooled",
-        evaluate(claim, &aggregate::observations(rows)),
-        pooled_effect(&weights),
-    )];
-    out.extend(per);
-    out
 }
 
 /// Every accuracy claim whose two methods the plan has, at every value (base first) of every

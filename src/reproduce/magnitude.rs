@@ -152,34 +152,36 @@ pub fn pooled_effect(per_dataset: &[(usize, Option<f64>)]) -> Option<f64> {
 /// Every accuracy claim of the plan, pooled and then per plan dataset (plan order).
 pub fn scoped(plan: &Plan, rows: &[Row]) -> Vec<Scoped> {
     let methods: Vec<String> = plan.methods.iter().map(|m| m.name.clone()).collect();
-    let obs = aggregate::observations(rows);
-    let mut out = Vec::new();
-    for c in claims_for(&methods)
+    claims_for(&methods)
         .iter()
         .filter(|c| c.measure == Measure::PsnrGain)
-    {
-        let per: Vec<Scoped> = plan
-            .datasets
-            .iter()
-            .map(|d| {
-                let sub: Vec<Row> = rows
-                    .iter()
-                    .filter(|r| r.dataset == d.name)
-                    .cloned()
-                    .collect();
-                let e = d.paper.as_deref().and_then(|p| paper_effect(c, p));
-                Scoped::new(&d.name, evaluate(c, &aggregate::observations(&sub)), e)
-            })
-            .collect();
-        let weights: Vec<(usize, Option<f64>)> =
-            per.iter().map(|s| (s.verdict.n, s.paper_effect)).collect();
-        out.push(Scoped::new(
-            "pooled",
-            evaluate(c, &obs),
-            pooled_effect(&weights),
-        ));
-        out.extend(per);
-    }
+        .flat_map(|c| scopes(plan, c, rows))
+        .collect()
+}
+
+/// A claim's verdicts on `rows`: pooled, then per plan dataset (plan order).
+pub(super) fn scopes(plan: &Plan, claim: &Claim, rows: &[Row]) -> Vec<Scoped> {
+    let per: Vec<Scoped> = plan
+        .datasets
+        .iter()
+        .map(|d| {
+            let sub: Vec<Row> = rows
+                .iter()
+                .filter(|r| r.dataset == d.name)
+                .cloned()
+                .collect();
+            let e = d.paper.as_deref().and_then(|p| paper_effect(claim, p));
+            Scoped::new(&d.name, evaluate(claim, &aggregate::observations(&sub)), e)
+        })
+        .collect();
+    let weights: Vec<(usize, Option<f64>)> =
+        per.iter().map(|s| (s.verdict.n, s.paper_effect)).collect();
+    let mut out = vec![Scoped::new(
+        "pooled",
+        evaluate(claim, &aggregate::observations(rows)),
+        pooled_effect(&weights),
+    )];
+    out.extend(per);
     out
 }
 
