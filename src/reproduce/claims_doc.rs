@@ -110,14 +110,8 @@ pub fn render(plan: &Plan, rows: &[Row], h: &Header) -> String {
             cell(&x.scope),
             v.n,
             db(v.mean),
-            if v.n >= 2 {
-                format!("[{}, {}]", db(v.lo), db(v.hi))
-            } else {
-                "-".into()
-            },
-            x.paper_effect
-                .map(|e| format!("{e:+.2} dB"))
-                .unwrap_or_else(|| "-".into()),
+            x.interval_cell(db),
+            x.paper_cell(),
             x.reading()
         );
     }

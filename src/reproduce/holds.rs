@@ -148,14 +148,8 @@ pub fn section(plan: &Plan, rows: &[Row]) -> String {
                 cell(&sc.scope),
                 v.n,
                 db(v.mean),
-                if v.n >= 2 {
-                    format!("[{}, {}]", db(v.lo), db(v.hi))
-                } else {
-                    "-".into()
-                },
-                sc.paper_effect
-                    .map(|e| format!("{e:+.2} dB"))
-                    .unwrap_or_else(|| "-".into()),
+                sc.interval_cell(db),
+                sc.paper_cell(),
                 v.word.as_str(),
                 sc.place.as_str()
             );

@@ -100,6 +100,23 @@ pub struct Scoped {
 }
 
 impl Scoped {
+    /// The 95 % interval as a table cell, its ends written by `f` ("-" below two pairs).
+    pub fn interval_cell(&self, f: impl Fn(f64) -> String) -> String {
+        let v = &self.verdict;
+        if v.n >= 2 {
+            format!("[{}, {}]", f(v.lo), f(v.hi))
+        } else {
+            "-".into()
+        }
+    }
+
+    /// The paper's effect as a table cell ("-" when the paper gives none here).
+    pub fn paper_cell(&self) -> String {
+        self.paper_effect
+            .map(|e| format!("{e:+.2} dB"))
+            .unwrap_or_else(|| "-".into())
+    }
+
     pub fn new(scope: &str, verdict: Verdict, paper_effect: Option<f64>) -> Scoped {
         let place = place(paper_effect, verdict.lo, verdict.hi, verdict.n);
         Scoped {
@@ -217,14 +234,8 @@ pub fn section(plan: &Plan, rows: &[Row]) -> String {
             x.scope,
             v.n,
             f(v.mean),
-            if v.n >= 2 {
-                format!("[{}, {}]", f(v.lo), f(v.hi))
-            } else {
-                "-".into()
-            },
-            x.paper_effect
-                .map(|e| format!("{e:+.2} dB"))
-                .unwrap_or_else(|| "-".into()),
+            x.interval_cell(f),
+            x.paper_cell(),
             x.reading()
         );
     }
