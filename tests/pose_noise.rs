@@ -29,13 +29,7 @@ fn data(dir: &Path, out: &str, extra: &[&str]) -> Output {
         .expect("run unispine")
 }
 
-fn text(o: &Output) -> String {
-    format!(
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
+use common::cli::text;
 
 fn read(dir: &Path, ds: &str, f: &str) -> Vec<u8> {
     std::fs::read(dir.join(ds).join(f)).unwrap()

@@ -16,13 +16,7 @@ fn reproduce(args: &[&str], cwd: &Path) -> Output {
         .expect("run unispine")
 }
 
-fn text(o: &Output) -> String {
-    format!(
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
+use common::cli::text;
 
 /// A plan small enough for the test suite: a 32^3 phantom, 32 x 32 detector, 10 training
 /// views, 30 iterations.

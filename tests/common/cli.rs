@@ -20,6 +20,15 @@ pub fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_unispine"))
 }
 
+/// Stdout and stderr of a finished run, one after the other (for assertion messages).
+pub fn text(o: &std::process::Output) -> String {
+    format!(
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
 /// Run `unispine ARGS`.
 pub fn run<S: AsRef<OsStr>>(args: &[S]) -> Run {
     run_threads(args, None)
