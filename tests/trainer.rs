@@ -5,7 +5,6 @@
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use clap::FromArgMatches;
 use unispine::error::Error;
 use unispine::gaussians::ply;
 use unispine::image2d::Image2d;
@@ -212,20 +211,20 @@ fn presets_parse_and_round_trip() {
     assert!(x.spwm.is_none() && x.loss.data_term == unispine::loss::DataTerm::L1);
     // Command line: preset + flag-by-flag overrides, parsed by the library's settings table.
     let method = unispine::method::TrainMethod::parse("3dgs").unwrap();
-    let m = TrainOverrides::command()
-        .try_get_matches_from([
-            "train",
-            "--color",
-            "rirf-paper",
-            "--spwm",
-            "true",
-            "--max-gaussians",
-            "1000",
-            "--eval-iterations",
-            "10,20",
-        ])
-        .unwrap();
-    let c = TrainOverrides::from_arg_matches(&m)
+    let argv: Vec<String> = [
+        "--color",
+        "rirf-paper",
+        "--spwm",
+        "true",
+        "--max-gaussians",
+        "1000",
+        "--eval-iterations",
+        "10,20",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    let c = unispine::flags::parse_set::<TrainOverrides>(&argv)
         .unwrap()
         .apply(method.gaussians().unwrap(), Some(50))
         .unwrap();
@@ -235,9 +234,9 @@ fn presets_parse_and_round_trip() {
     assert!(c.spwm.is_some());
     assert_eq!(c.densify.max_gaussians, Some(1000));
     assert_eq!(c.eval_points(), vec![10, 20, 50]);
-    assert!(TrainOverrides::command()
-        .try_get_matches_from(["train", "--color", "rgb"])
-        .is_err());
+    assert!(
+        unispine::flags::parse_set::<TrainOverrides>(&["--color".into(), "rgb".into()]).is_err()
+    );
     assert!(unispine::method::TrainMethod::parse("rgb").is_err());
     assert!(unispine::method::TrainMethod::parse("fdk")
         .unwrap()

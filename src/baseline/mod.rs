@@ -229,18 +229,46 @@ pub const FLAGS: [&str; 5] = ["iters", "seed", "vm-lines", "rays", "threads"];
 
 /// The `unispine train` flags that only baselines read (declared here so that reproduction
 /// plans know them too).
-#[derive(Clone, Debug, Default, clap::Args)]
+#[derive(Clone, Debug, Default)]
 pub struct BaselineFlags {
-    /// TensoRF's line factor (tensorf, tensorf-full only): `upstream` (default; SAX-NeRF reads
-    /// the plane at (0, w) instead of the line vector) or `corrected` (the line vector).
-    #[arg(long, value_enum)]
+    /// TensoRF's line factor (tensorf, tensorf-full only).
     pub vm_lines: Option<VmLines>,
-    /// The pixels a neural field's training rays are drawn from: `positive` (default; the
-    /// upstream trainers' pixels with projection > 0, which leaves space crossed only by
-    /// background rays unconstrained) or `all` (every pixel; not an upstream setting, labelled
-    /// `all pixels` in tables).
-    #[arg(long, value_enum)]
+    /// The pixels a neural field's training rays are drawn from.
     pub rays: Option<RayPixels>,
+}
+
+impl crate::flags::FlagSet for BaselineFlags {
+    const GROUP: &'static str = "BaselineFlags";
+
+    fn flags() -> Vec<crate::flags::Flag> {
+        use crate::flags::Flag;
+        vec![
+            Flag::value::<VmLines>(
+                "vm-lines",
+                "TensoRF's line factor (tensorf, tensorf-full only): `upstream` (default; \
+                 SAX-NeRF reads the plane at (0, w) instead of the line vector) or `corrected` \
+                 (the line vector).",
+            ),
+            Flag::value::<RayPixels>(
+                "rays",
+                "The pixels a neural field's training rays are drawn from: `positive` \
+                 (default; the upstream trainers' pixels with projection > 0, which leaves space \
+                 crossed only by background rays unconstrained) or `all` (every pixel; not an \
+                 upstream setting, labelled `all pixels` in tables).",
+            ),
+        ]
+    }
+
+    fn set(&mut self, long: &str, value: Option<&str>) -> std::result::Result<(), String> {
+        use crate::flags::FlagValue;
+        let text = value.unwrap_or_default();
+        match long {
+            "vm-lines" => self.vm_lines = Some(VmLines::parse_flag(text)?),
+            "rays" => self.rays = Some(RayPixels::parse_flag(text)?),
+            _ => return Err(format!("unknown flag `--{long}`")),
+        }
+        Ok(())
+    }
 }
 
 /// Settings of a baseline run beyond its preset.

@@ -160,11 +160,11 @@ pub struct CtArgs {
     pub margin_mm: f64,
     /// HU conversion: `naf-mu` (NAF: mu = 0.206 + (0.206 - 0.0004) / 1000 HU in 1/cm, clamped
     /// at 0), `linear-clip` ([-1000, 2000] HU -> [0, 1]) or `none`.
-    #[arg(long, value_enum, default_value = "naf-mu")]
+    #[arg(long, value_parser = super::flags::choice::<HuConversion>(), default_value = "naf-mu")]
     pub hu: HuConversion,
     /// Normalisation after the HU conversion: `min-max` to [0, 1] (NAF / UniSpine-GS),
     /// `percentile` (0.5 / 99.5 %) or `none`.
-    #[arg(long, value_enum, default_value = "min-max")]
+    #[arg(long, value_parser = super::flags::choice::<Normalization>(), default_value = "min-max")]
     pub normalize: Normalization,
     /// Resample so that no axis has more than N voxels (trilinear, same physical box; axes
     /// already at or below N are kept). 0 keeps the grid.

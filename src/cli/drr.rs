@@ -53,7 +53,7 @@ pub struct DrrArgs {
     /// HU conversion applied before projecting: `none` (values as they are), `naf-mu`
     /// (mu = 0.206 + (0.206 - 0.0004) / 1000 * HU in 1/cm, clamped at 0) or `linear-clip`
     /// (HU clipped to [-1000, 2000], mapped to [0, 1]).
-    #[arg(long, value_enum, default_value = "none")]
+    #[arg(long, value_parser = super::flags::choice::<HuConversion>(), default_value = "none")]
     pub hu: HuConversion,
     /// Output folder (created if missing).
     #[arg(long)]

@@ -6,6 +6,7 @@ pub mod bench_train;
 pub mod data;
 pub mod drr;
 pub mod eval;
+pub mod flags;
 pub mod gradcheck;
 pub mod progress;
 pub mod render;

@@ -10,6 +10,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context};
 
+use super::flags::Flags;
 use super::progress::Progress;
 use super::signals;
 use unispine::error::Error;
@@ -41,12 +42,12 @@ pub struct TrainArgs {
     #[arg(long, hide = true)]
     pub stop_after: Option<usize>,
     #[command(flatten)]
-    pub baseline: unispine::baseline::BaselineFlags,
+    pub baseline: Flags<unispine::baseline::BaselineFlags>,
     /// rayon threads (default: all cores). Results do not depend on it.
     #[arg(long)]
     pub threads: Option<usize>,
     #[command(flatten)]
-    pub overrides: TrainOverrides,
+    pub overrides: Flags<TrainOverrides>,
 }
 
 /// Set up rayon's global pool with `threads` threads (no-op when `None`).
@@ -77,8 +78,8 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let (cfg, data, out) = match &args.resume {
         Some(run) => {
             if args.method != TrainMethod::Gaussians(Method::Unispine)
-                || args.baseline.vm_lines.is_some()
-                || args.baseline.rays.is_some()
+                || args.baseline.0.vm_lines.is_some()
+                || args.baseline.0.rays.is_some()
             {
                 bail!("--resume continues the run with its own config.json: give only --data and --threads");
             }
@@ -206,14 +207,14 @@ enum Pending {
 fn config(args: &TrainArgs, data: &std::path::Path) -> anyhow::Result<Pending> {
     match args.method {
         TrainMethod::Gaussians(method) => {
-            unispine::baseline::check_vm_lines(method.name(), args.baseline.vm_lines)?;
-            if args.baseline.rays.is_some() {
+            unispine::baseline::check_vm_lines(method.name(), args.baseline.0.vm_lines)?;
+            if args.baseline.0.rays.is_some() {
                 bail!(
                     "invalid `--rays`: only for the neural-field baselines, not `{}`",
                     method.name()
                 );
             }
-            let mut cfg = args.overrides.apply(method, args.iters)?;
+            let mut cfg = args.overrides.0.apply(method, args.iters)?;
             // Absolute, so that `eval --run` and `--resume` work from any folder.
             let abs = data
                 .canonicalize()
@@ -224,6 +225,7 @@ fn config(args: &TrainArgs, data: &std::path::Path) -> anyhow::Result<Pending> {
         TrainMethod::Baseline(b) => {
             if let Some(flag) = args
                 .overrides
+                .0
                 .given()
                 .into_iter()
                 .find(|f| !unispine::baseline::FLAGS.contains(&&f[2..]))
@@ -236,9 +238,9 @@ fn config(args: &TrainArgs, data: &std::path::Path) -> anyhow::Result<Pending> {
             }
             let opts = unispine::baseline::BaselineOptions {
                 iters: args.iters,
-                seed: args.overrides.seed,
-                vm_lines: args.baseline.vm_lines,
-                rays: args.baseline.rays,
+                seed: args.overrides.0.seed,
+                vm_lines: args.baseline.0.vm_lines,
+                rays: args.baseline.0.rays,
             };
             Ok(Pending::Baseline(b, opts))
         }

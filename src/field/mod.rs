@@ -87,16 +87,17 @@ pub enum EncoderConfig {
     DenseGrid { resolution: usize, features: usize },
 }
 
+crate::choice! {
 /// Which pixels a training batch draws its rays from.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum RayPixels {
     /// Pixels with projection > 0 (SAX-NeRF / naf_cbct `src/dataset/tigre.py`): space crossed
     /// only by background rays is never constrained.
     #[default]
-    Positive,
+    Positive = "positive",
     /// Every pixel of the view (not an upstream setting).
-    All,
+    All = "all",
+}
 }
 
 impl RayPixels {

@@ -54,34 +54,21 @@ use crate::math::activations::logit;
 use crate::par::CHUNK;
 use crate::real::Real;
 
+crate::choice! {
 /// How the initial positions are chosen.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
-)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum InitKind {
     /// Grid of voxel centres every `interval` voxels (X-Gaussian ACUI).
-    Acui,
+    Acui = "acui",
     /// Uniform random points in the volume box, as many as ACUI would give (3DGS baseline).
-    Random,
+    Random = "random",
     /// `init.points` uniform points in [-1.3, 1.3)^3 mm about the isocentre (the upstream
     /// non-ACUI branch, 3DGS's rule without SfM points).
-    UnitCube,
+    UnitCube = "unit-cube",
     /// `init.points` voxel centres where an FDK reconstruction of the training views exceeds
     /// `init.fdk_threshold` of its maximum (as R2-Gaussian).
-    Fdk,
+    Fdk = "fdk",
 }
-
-impl InitKind {
-    /// The name used on the command line and in plans.
-    pub fn name(self) -> &'static str {
-        match self {
-            InitKind::Acui => "acui",
-            InitKind::Random => "random",
-            InitKind::UnitCube => "unit-cube",
-            InitKind::Fdk => "fdk",
-        }
-    }
 }
 
 /// Default `init.points` (the upstream unit cube's 100,000).

@@ -21,29 +21,19 @@ use serde::{Deserialize, Serialize};
 use crate::gaussians::model::N_FEATURES;
 use crate::real::Real;
 
+crate::choice! {
 /// How a Gaussian's intensity is computed from its 16 features.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum ColorMode {
     /// The paper's Eq. (2): i = Sigmoid(sum_k lambda_k f_k).
     #[default]
-    RirfPaper,
+    RirfPaper = "rirf-paper",
     /// X-Gaussian's code: i = max(0, 0.5 + sum_k lambda_k f_k).
-    RirfXgaussian,
+    RirfXgaussian = "rirf-xgaussian",
     /// View-dependent SH colour (3DGS baseline): i = max(0, 0.5 + SH(dir) . f), dir from the
     /// camera centre to the mean.
-    Sh,
+    Sh = "sh",
 }
-
-impl ColorMode {
-    /// The name used in files and on the command line (`rirf-paper`, `rirf-xgaussian`, `sh`).
-    pub fn name(self) -> &'static str {
-        match self {
-            ColorMode::RirfPaper => "rirf-paper",
-            ColorMode::RirfXgaussian => "rirf-xgaussian",
-            ColorMode::Sh => "sh",
-        }
-    }
 }
 
 /// Real SH constant of degree 0, 1 / (2 sqrt(pi)).

@@ -21,16 +21,17 @@ use rayon::prelude::*;
 use crate::image2d::Image2d;
 use crate::real::Real;
 
+crate::choice! {
 /// The data term of the loss.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
 pub enum DataTerm {
     /// Mean absolute error (3DGS, X-Gaussian).
-    L1,
+    L1 = "l1",
     /// Mean Charbonnier penalty.
-    Charbonnier,
+    Charbonnier = "charbonnier",
     /// SPWM-weighted Charbonnier, Eq. (9).
-    WeightedCharbonnier,
+    WeightedCharbonnier = "weighted-charbonnier",
+}
 }
 
 /// Loss settings (Eq. 8). `Default` is the UniSpine-GS loss

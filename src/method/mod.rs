@@ -115,20 +115,13 @@ impl TrainMethod {
     /// Every method name with its one line of help: the presets in declaration order, then the
     /// baselines in table order.
     pub fn all() -> Vec<(&'static str, String)> {
-        use crate::train::Method;
-        let presets = <Method as clap::ValueEnum>::value_variants()
-            .iter()
-            .map(|m| {
-                let help = clap::ValueEnum::to_possible_value(m)
-                    .and_then(|v| v.get_help().map(|h| h.to_string()))
-                    .unwrap_or_default();
-                (m.name(), help)
-            });
+        use crate::flags::FlagValue;
+        let presets = crate::train::Method::choices();
         let baselines = Baseline::names().into_iter().map(|b| {
             let help = Baseline::parse(b).map(Baseline::help).unwrap_or_default();
             (b, help)
         });
-        presets.chain(baselines).collect()
+        presets.into_iter().chain(baselines).collect()
     }
 
     /// The method called `name`; the error lists every name.
@@ -136,7 +129,7 @@ impl TrainMethod {
         if let Some(b) = Baseline::parse(name) {
             return Ok(TrainMethod::Baseline(b));
         }
-        <crate::train::Method as clap::ValueEnum>::from_str(name, false)
+        crate::flags::parse_choice::<crate::train::Method>(name)
             .map(TrainMethod::Gaussians)
             .map_err(|_| {
                 let names: Vec<&str> = TrainMethod::all().into_iter().map(|m| m.0).collect();

@@ -51,38 +51,22 @@ use crate::render::ColorMode;
 /// The iteration count of the paper schedule (UniSpine-GS `iterations: 20000`).
 pub const PAPER_ITERATIONS: usize = 20_000;
 
+crate::choice! {
 /// Named method presets.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Method {
     /// 3D Gaussian splatting baseline: view-dependent SH colour, random init, L1 + D-SSIM.
-    #[value(name = "3dgs")]
-    #[serde(rename = "3dgs")]
-    Gs3d,
+    Gs3d = "3dgs",
     /// X-Gaussian: RIRF + ACUI, L1 + D-SSIM.
-    Xgaussian,
+    Xgaussian = "xgaussian",
     /// UniSpine-GS: RIRF + ACUI + SPWM + weighted Charbonnier.
-    Unispine,
+    Unispine = "unispine",
     /// SPWM + weighted Charbonnier without RIRF (SH colour) and without ACUI (random init).
-    SpwmOnly,
+    SpwmOnly = "spwm-only",
     /// Vanilla 3D Gaussian splatting as shipped: its 30,000-iteration defaults, SH colour, the
     /// unit-cube init, L1 + D-SSIM.
-    #[value(name = "3dgs-vanilla")]
-    #[serde(rename = "3dgs-vanilla")]
-    Gs3dVanilla,
+    Gs3dVanilla = "3dgs-vanilla",
 }
-
-impl Method {
-    /// The name used on the command line and in reports.
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Gs3d => "3dgs",
-            Method::Xgaussian => "xgaussian",
-            Method::Unispine => "unispine",
-            Method::SpwmOnly => "spwm-only",
-            Method::Gs3dVanilla => "3dgs-vanilla",
-        }
-    }
 }
 
 /// Learning rates (UniSpine-GS config values).

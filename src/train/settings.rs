@@ -1,9 +1,9 @@
 //! The settings of `unispine train`, each declared once in the `settings!` table below: the
 //! `config.json` field it lives in, its allowed range (checked by [`TrainConfig::validate`] on
 //! every config: preset, `--config FILE` and flags alike) and the command-line flag that
-//! overrides it, with its help. The table generates [`TrainOverrides`] (the clap flags),
-//! [`TrainOverrides::apply`] and the range checks, so the flags, the saved config and the
-//! validation cannot drift apart.
+//! overrides it, with its help. The table generates [`TrainOverrides`] and its flags (a
+//! [`FlagSet`]: what the command line and reproduction plans parse), [`TrainOverrides::apply`]
+//! and the range checks, so the flags, the saved config and the validation cannot drift apart.
 //!
 //! A row reads
 //!
@@ -21,8 +21,8 @@
 //! absent (`get` returns an `Option<f64>`: off, or a disabled section); `r` is one of
 //! [`ge_le`], [`ge_lt`], [`gt_le`], [`gt_lt`] (`ge` = closed, `gt` = open end, bounds may be
 //! infinite). Either part may be left out: a setting without a flag is still validated, a flag
-//! without a range takes any value its type can hold. Extra `#[arg(...)]` attributes go beside
-//! the help (a value parser, a delimiter).
+//! without a range takes any value its type can hold. The flag's type parses its text
+//! ([`FlagValue`]: numbers, `true` / `false`, comma-separated lists, named [`crate::flags::Choice`]s).
 //!
 //! Adding a setting: give it a field (with a `#[serde(default)]` that keeps old `config.json`
 //! files loading with the old behaviour) in [`TrainConfig`] or the stage config it belongs to,
@@ -35,6 +35,7 @@ use std::path::PathBuf;
 use super::compact::CompactConfig;
 use super::config::{Method, TrainConfig};
 use crate::error::{Error, Result};
+use crate::flags::{Flag, FlagSet, FlagValue};
 use crate::gaussians::init::{InitKind, MAX_INIT_POINTS};
 use crate::loss::DataTerm;
 use crate::render::ColorMode;
@@ -123,16 +124,6 @@ fn check_range(field: &str, v: f64, r: Interval) -> Result<()> {
     ))
 }
 
-fn parse_color(s: &str) -> std::result::Result<ColorMode, String> {
-    serde_json::from_value(serde_json::Value::String(s.to_string()))
-        .map_err(|_| format!("unknown colour mode `{s}` (rirf-paper, rirf-xgaussian, sh)"))
-}
-
-fn parse_data_term(s: &str) -> std::result::Result<DataTerm, String> {
-    serde_json::from_value(serde_json::Value::String(s.to_string()))
-        .map_err(|_| format!("unknown data term `{s}` (l1, charbonnier, weighted-charbonnier)"))
-}
-
 /// Generates [`TrainOverrides`], [`TrainOverrides::apply`]'s flag part and [`check_ranges`]
 /// from one table; see the module documentation for the row syntax.
 macro_rules! settings {
@@ -140,25 +131,63 @@ macro_rules! settings {
         $field:literal
         $(range($get:expr, $range:expr))?
         $(range_if($get_opt:expr, $range_opt:expr))?
-        $(flag($(#[$attr:meta])* $name:ident : $ty:ty => |$c:ident, $v:ident| $set:expr))?
+        $(flag($(#[doc = $doc:literal])* $name:ident : $ty:ty => |$c:ident, $v:ident| $set:expr))?
         ;
     )*) => {
         /// Command-line overrides of a preset (each flag replaces one field; see
-        /// [`crate::train::settings`]).
-        #[derive(Clone, Debug, Default, clap::Args)]
+        /// [`crate::train::settings`]); their flags are [`FlagSet::flags`].
+        #[derive(Clone, Debug, Default)]
         pub struct TrainOverrides {
             /// Start from this config JSON (e.g. a run's `config.json`) instead of the preset.
-            #[arg(long)]
             pub config: Option<PathBuf>,
             $($(
-                $(#[$attr])*
-                #[arg(long)]
+                $(#[doc = $doc])*
                 pub $name: Option<$ty>,
             )?)*
             /// Scale every schedule (lr, densification, resets, feature steps, SPWM warm-up, eval
             /// points) from 20000 iterations to --iters.
-            #[arg(long)]
             pub compress_schedule: bool,
+        }
+
+        impl FlagSet for TrainOverrides {
+            const GROUP: &'static str = "TrainOverrides";
+
+            fn flags() -> Vec<Flag> {
+                let mut v = vec![Flag::value::<PathBuf>(
+                    "config",
+                    "Start from this config JSON (e.g. a run's `config.json`) instead of the \
+                     preset.",
+                )];
+                $($(
+                    v.push(Flag::value::<$ty>(stringify!($name), concat!($($doc),*)));
+                )?)*
+                v.push(Flag::switch(
+                    "compress_schedule",
+                    "Scale every schedule (lr, densification, resets, feature steps, SPWM \
+                     warm-up, eval points) from 20000 iterations to --iters.",
+                ));
+                v
+            }
+
+            fn set(&mut self, long: &str, value: Option<&str>) -> std::result::Result<(), String> {
+                let long = long.replace('-', "_");
+                let text = value.unwrap_or_default();
+                if long == "config" {
+                    self.config = Some(PathBuf::parse_flag(text)?);
+                    return Ok(());
+                }
+                $($(
+                    if long == stringify!($name) {
+                        self.$name = Some(<$ty as FlagValue>::parse_flag(text)?);
+                        return Ok(());
+                    }
+                )?)*
+                if long == "compress_schedule" {
+                    self.compress_schedule = true;
+                    return Ok(());
+                }
+                Err(format!("unknown flag `--{}`", long.replace('_', "-")))
+            }
         }
 
         impl TrainOverrides {
@@ -234,12 +263,10 @@ settings! {
     );
     "color" flag(
         /// Intensity model: rirf-paper, rirf-xgaussian or sh.
-        #[arg(value_parser = parse_color)]
         color: ColorMode => |c, v| c.color = v
     );
     "init.kind" flag(
         /// Initialisation: acui, random, unit-cube or fdk.
-        #[arg(value_enum)]
         init: InitKind => |c, v| c.init.kind = v
     );
     "init.points" range(|c| c.init.points as f64, ge_le(1.0, MAX_INIT_POINTS as f64)) flag(
@@ -261,7 +288,6 @@ settings! {
     );
     "loss.data_term" flag(
         /// Data term: l1, charbonnier or weighted-charbonnier.
-        #[arg(value_parser = parse_data_term)]
         data_term: DataTerm => |c, v| c.loss.data_term = v
     );
     "loss.lambda_dssim" range(|c| c.loss.lambda_dssim, ge_le(0.0, 1.0)) flag(
@@ -341,7 +367,6 @@ settings! {
     "background" range(|c| c.background, gt_lt(-INF, INF));
     "eval_iterations" flag(
         /// Evaluate on the test views at these iterations (comma-separated).
-        #[arg(value_delimiter = ',')]
         eval_iterations: Vec<usize> => |c, v| c.eval_iterations = v
     );
     "train_views" range_if(|c| c.train_views.map(|v| v as f64), ge_lt(1.0, INF)) flag(
@@ -447,12 +472,6 @@ impl TrainOverrides {
         }
         Ok(())
     }
-
-    /// The `unispine train` flags these overrides parse (`--config`, one per setting,
-    /// `--compress-schedule`), as a clap command of their own.
-    pub fn command() -> clap::Command {
-        <TrainOverrides as clap::Args>::augment_args(clap::Command::new("train"))
-    }
 }
 
 #[cfg(test)]
@@ -493,8 +512,8 @@ mod tests {
 
     #[test]
     fn the_flags_keep_their_names() {
-        let cmd = TrainOverrides::command();
-        let longs: Vec<&str> = cmd.get_arguments().filter_map(|a| a.get_long()).collect();
+        let flags = TrainOverrides::flags();
+        let longs: Vec<&str> = flags.iter().map(|f| f.long.as_str()).collect();
         assert_eq!(
             longs,
             [
@@ -532,9 +551,7 @@ mod tests {
 
     #[test]
     fn each_flag_sets_its_field() {
-        use clap::FromArgMatches;
         let argv = [
-            "train",
             "--seed",
             "7",
             "--color",
@@ -576,8 +593,8 @@ mod tests {
             "--preview-views",
             "9",
         ];
-        let m = TrainOverrides::command().get_matches_from(argv);
-        let o = TrainOverrides::from_arg_matches(&m).unwrap();
+        let argv: Vec<String> = argv.iter().map(|s| s.to_string()).collect();
+        let o: TrainOverrides = crate::flags::parse_set(&argv).unwrap();
         let c = o.apply(Method::Unispine, Some(100)).unwrap();
         let mut want = TrainConfig::preset(Method::Unispine);
         want.iterations = 100;
@@ -603,8 +620,8 @@ mod tests {
         want.preview_views = 9;
         assert_eq!(c, want);
         // A flag is validated like the config field it sets.
-        let m = TrainOverrides::command().get_matches_from(["train", "--lambda-dssim", "2"]);
-        let e = TrainOverrides::from_arg_matches(&m)
+        let argv = ["--lambda-dssim".to_string(), "2".to_string()];
+        let e = crate::flags::parse_set::<TrainOverrides>(&argv)
             .unwrap()
             .apply(Method::Unispine, None)
             .unwrap_err()

@@ -29,27 +29,18 @@ pub const NAF_MU_AIR: f64 = 0.0004;
 /// HU window of `linear-clip`.
 pub const LINEAR_CLIP_HU: [f64; 2] = [-1000.0, 2000.0];
 
+crate::choice! {
 /// A named HU-to-value conversion.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum HuConversion {
     /// NAF: mu = 0.206 + (0.206 - 0.0004) / 1000 * HU, in 1/cm, clamped at 0.
-    NafMu,
+    NafMu = "naf-mu",
     /// HU clipped to [-1000, 2000], mapped linearly to [0, 1].
-    LinearClip,
+    LinearClip = "linear-clip",
     /// No conversion.
     #[default]
-    None,
+    None = "none",
+}
 }
 
 impl HuConversion {
@@ -70,15 +61,6 @@ impl HuConversion {
                 (hu.clamp(lo, hi) - lo) / (hi - lo)
             }
             HuConversion::None => hu,
-        }
-    }
-
-    /// Name as used in configs and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            HuConversion::NafMu => "naf-mu",
-            HuConversion::LinearClip => "linear-clip",
-            HuConversion::None => "none",
         }
     }
 
@@ -103,27 +85,18 @@ impl HuConversion {
     }
 }
 
+crate::choice! {
 /// A named normalisation.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Normalization {
     /// (v - min) / (max - min).
-    MinMax,
+    MinMax = "min-max",
     /// (v - p_lo) / (p_hi - p_lo) clipped to [0, 1]; percentiles 0.5 and 99.5 by default.
-    Percentile,
+    Percentile = "percentile",
     /// Values as they are.
     #[default]
-    None,
+    None = "none",
+}
 }
 
 /// Default percentiles of [`Normalization::Percentile`].

@@ -43,16 +43,15 @@ pub const MAT: [[usize; 2]; 3] = [[0, 1], [0, 2], [1, 2]];
 /// Axis of each line (`vecMode`).
 pub const VEC: [usize; 3] = [2, 1, 0];
 
+crate::choice! {
 /// Where the line factor is read from (see the module doc).
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
-)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum VmLines {
     /// SAX-NeRF: the plane itself at `(0, c_v)`.
-    Upstream,
+    Upstream = "upstream",
     /// The line vector at `c_v`.
-    Corrected,
+    Corrected = "corrected",
+}
 }
 
 /// A VM encoder.

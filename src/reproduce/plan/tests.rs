@@ -519,7 +519,6 @@ fn too_many_condition_cells_are_refused_before_anything_runs() {
 
 #[test]
 fn the_charbonnier_only_variant_is_unispine_without_spwm_with_plain_charbonnier() {
-    use clap::FromArgMatches;
     let p = Plan::load("gap", &TrainSchema::of_train()).unwrap();
     let v = p
         .methods
@@ -527,11 +526,7 @@ fn the_charbonnier_only_variant_is_unispine_without_spwm_with_plain_charbonnier(
         .find(|m| m.name == "charbonnier-only")
         .unwrap();
     assert_eq!(v.base, "unispine");
-    let argv = std::iter::once("train".to_string()).chain(v.args.iter().cloned());
-    let m = crate::train::TrainOverrides::command()
-        .try_get_matches_from(argv)
-        .unwrap();
-    let o = crate::train::TrainOverrides::from_arg_matches(&m).unwrap();
+    let o: crate::train::TrainOverrides = crate::flags::parse_set(&v.args).unwrap();
     let cfg = o.apply(crate::train::Method::Unispine, None).unwrap();
     let preset = crate::train::TrainOverrides::default()
         .apply(crate::train::Method::Unispine, None)

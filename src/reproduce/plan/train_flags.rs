@@ -10,6 +10,7 @@ use toml::Spanned;
 use super::err_at;
 use crate::baseline::BaselineFlags;
 use crate::error::Result;
+use crate::flags::FlagSet;
 use crate::method::TrainMethod;
 use crate::train::TrainOverrides;
 
@@ -34,9 +35,13 @@ impl TrainSchema {
     /// The schema of this build's `unispine train`.
     pub fn of_train() -> Self {
         let all = TrainMethod::all();
-        let flags = train_command()
-            .get_arguments()
-            .filter_map(|a| Some((a.get_long()?.to_string(), a.get_action().takes_values())))
+        let flags = TrainOverrides::flags()
+            .into_iter()
+            .chain(BaselineFlags::flags())
+            .map(|f| {
+                let takes_value = f.takes_value();
+                (f.long, takes_value)
+            })
             .collect();
         TrainSchema {
             methods: all.iter().map(|m| m.0.to_string()).collect(),
@@ -95,7 +100,7 @@ pub(super) fn flags_to_args(
                     .flags
                     .iter()
                     .map(|f| f.0.as_str())
-                    .filter(|f| !HARNESS_FLAGS.contains(f) && *f != "help")
+                    .filter(|f| !HARNESS_FLAGS.contains(f))
                     .collect::<Vec<_>>()
                     .join(", ")
             )));
@@ -120,34 +125,12 @@ pub(super) fn flags_to_args(
     Ok(args)
 }
 
-/// The settings flags of `unispine train`: the Gaussian trainer's ([`TrainOverrides`]) and the
-/// baselines' ([`BaselineFlags`]).
-fn train_command() -> clap::Command {
-    <BaselineFlags as clap::Args>::augment_args(TrainOverrides::command())
-}
-
 /// Check the variant `args` of method `base` with the parser of `unispine train`'s settings
 /// ([`TrainOverrides`], [`BaselineFlags`]) and, for a Gaussian preset, the allowed range of
 /// every value on that preset ([`TrainOverrides::check_on_preset`]); a message on failure.
 pub(super) fn check_train_args(base: &str, args: &[String]) -> std::result::Result<(), String> {
-    use clap::FromArgMatches;
     let method = TrainMethod::parse(base)?;
-    let argv = std::iter::once("train".to_string()).chain(args.iter().cloned());
-    let overrides = train_command()
-        .try_get_matches_from(argv)
-        .and_then(|m| {
-            let o = TrainOverrides::from_arg_matches(&m)?;
-            BaselineFlags::from_arg_matches(&m)?;
-            Ok(o)
-        })
-        .map_err(|e| {
-            let s = e.to_string();
-            s.lines()
-                .find(|l| l.starts_with("error:"))
-                .unwrap_or(&s)
-                .trim_start_matches("error: ")
-                .to_string()
-        })?;
+    let (overrides, _) = crate::flags::parse_args::<TrainOverrides, BaselineFlags>(args)?;
     if let Some(m) = method.gaussians() {
         overrides.check_on_preset(m).map_err(|e| e.to_string())?;
     }
