@@ -8,7 +8,10 @@ use crate::reproduce::aggregate::Row;
 use crate::reproduce::holds::{holds, Holds};
 use crate::reproduce::plan::Plan;
 
-use super::svg::{figure, Band, Dot, Line, Marker, Panel};
+use super::svg::{figure_rows, Band, Dot, Line, Marker, Panel};
+
+/// Panels per row: two fit the report's page width.
+const COLS: usize = 2;
 
 /// One panel: the points of one claim on one axis.
 fn panel(axis: &str, pts: &[&Holds]) -> Panel {
@@ -98,6 +101,7 @@ fn panel(axis: &str, pts: &[&Holds]) -> Panel {
             }]
         },
         dots,
+        x_whole: numeric.is_none(),
         ..Default::default()
     }
 }
@@ -132,7 +136,7 @@ pub fn charts(plan: &Plan, rows: &[Row]) -> Vec<(String, String, String)> {
             (
                 format!("holds-{}.svg", i + 1),
                 format!("Where it holds: {text} (pooled over datasets)"),
-                figure(&panels),
+                figure_rows(&panels, COLS),
             )
         })
         .collect()
@@ -196,7 +200,7 @@ mod tests {
                 scopes: vec![Scoped::new("pooled", evaluate(&claim, &obs), Some(2.0))],
             })
             .collect();
-        let svg = figure(&[panel(evil, &h.iter().collect::<Vec<_>>())]);
+        let svg = figure_rows(&[panel(evil, &h.iter().collect::<Vec<_>>())], COLS);
         assert_well_formed(&svg);
         assert!(!svg.contains("<script"));
         assert!(svg.contains("&lt;script&gt;alert(&#39;x&#39;)&lt;/script&gt;&quot;&amp;"));

@@ -496,7 +496,9 @@ pub fn markdown_to_html(md: &str) -> String {
         if t.is_empty() {
             continue;
         }
-        if let Some(x) = t.strip_prefix("## ") {
+        if let Some(x) = t.strip_prefix("### ") {
+            let _ = writeln!(h, "<h3>{}</h3>", inline(x));
+        } else if let Some(x) = t.strip_prefix("## ") {
             let _ = writeln!(h, "<h2>{}</h2>", inline(x));
         } else if let Some(x) = t.strip_prefix("# ") {
             let _ = writeln!(h, "<h1>{}</h1>", inline(x));
@@ -569,6 +571,8 @@ pub(crate) mod tests {
         assert!(h.contains("<tr><th>a</th><th>b</th></tr>"));
         assert!(h.contains("<tr><td>x</td><td><b>1</b></td></tr>"));
         assert!(h.contains("<li><code>c</code> &amp; d</li>"));
+        let h = markdown_to_html("## Two\n### Three <x>\n");
+        assert_eq!(h, "<h2>Two</h2>\n<h3>Three &lt;x&gt;</h3>\n");
     }
 
     #[test]

@@ -60,6 +60,8 @@ pub struct Panel {
     pub log_y: bool,
     /// log10 x axis (non-positive x values are skipped).
     pub log_x: bool,
+    /// Ticks only at whole numbers (an axis of categories numbered 0, 1, ...).
+    pub x_whole: bool,
     pub lines: Vec<Line>,
     pub markers: Vec<Marker>,
     pub bands: Vec<Band>,
@@ -104,7 +106,10 @@ pub fn ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
 fn fmt_tick(v: f64) -> String {
     let a = v.abs();
     if a != 0.0 && !(1e-3..1e5).contains(&a) {
-        format!("{v:.0e}")
+        // Three significant digits, trailing zeros dropped: neighbouring ticks stay distinct.
+        let s = format!("{v:.2e}");
+        let (m, e) = s.split_once('e').unwrap_or((&s, "0"));
+        format!("{}e{e}", m.trim_end_matches('0').trim_end_matches('.'))
     } else if (v - v.round()).abs() < 1e-9 * a.max(1.0) {
         format!("{}", v.round() as i64)
     } else {
@@ -218,6 +223,10 @@ impl Panel {
             } else {
                 ticks(xlo, xhi, 5)
             }
+        } else if self.x_whole {
+            (xlo.ceil() as i64..=xhi.floor() as i64)
+                .map(|k| k as f64)
+                .collect()
         } else {
             ticks(xlo, xhi, 6)
         };
@@ -435,23 +444,35 @@ const LEGEND_H: f64 = 28.0;
 /// across panels by position (series i has colour i everywhere); their labels, taken from the
 /// panel with the most series, form one legend strip under the panels.
 pub fn figure(panels: &[Panel]) -> String {
-    let width = PANEL_W * panels.len().max(1) as f64;
+    figure_rows(panels, panels.len())
+}
+
+/// [`figure`] with at most `cols` panels per row (rows top to bottom), so a figure of many
+/// panels stays readable at a page's width.
+pub fn figure_rows(panels: &[Panel], cols: usize) -> String {
+    let cols = cols.clamp(1, panels.len().max(1));
+    let rows = panels.len().div_ceil(cols).max(1);
+    let width = PANEL_W * cols as f64;
     let legend: Vec<&str> = panels
         .iter()
         .max_by_key(|p| p.lines.len())
         .map(|p| p.lines.iter().map(|l| l.label.as_str()).collect())
         .unwrap_or_default();
-    let height = PANEL_H + if legend.is_empty() { 0.0 } else { LEGEND_H };
+    let height = PANEL_H * rows as f64 + if legend.is_empty() { 0.0 } else { LEGEND_H };
     let mut s = format!(
         r#"<svg xmlns="http://www.w3.org/2000/svg" width="{width:.0}" height="{height:.0}" viewBox="0 0 {width:.0} {height:.0}" font-family="DejaVu Sans, Arial, sans-serif">
 <rect width="100%" height="100%" fill="white"/>
 "#
     );
     for (i, p) in panels.iter().enumerate() {
-        p.draw(&mut s, PANEL_W * i as f64, 0.0);
+        p.draw(
+            &mut s,
+            PANEL_W * (i % cols) as f64,
+            PANEL_H * (i / cols) as f64,
+        );
     }
     let mut x = MARGIN_L;
-    let y = PANEL_H + 12.0;
+    let y = PANEL_H * rows as f64 + 12.0;
     for (i, label) in legend.iter().enumerate() {
         let c = PALETTE[i % PALETTE.len()];
         let _ = writeln!(
@@ -534,6 +555,81 @@ mod tests {
                 assert!(!overlap, "labels {i} and {j} overlap: {a:?} {b:?}");
             }
         }
+    }
+
+    #[test]
+    fn panels_wrap_into_rows() {
+        let p = |t: &str| Panel {
+            title: t.into(),
+            lines: vec![Line {
+                label: "l".into(),
+                points: vec![(0.0, 0.0), (1.0, 1.0)],
+            }],
+            ..Default::default()
+        };
+        let s = figure_rows(&[p("A"), p("B"), p("C")], 2);
+        let (w, h) = (2.0 * PANEL_W, 2.0 * PANEL_H + LEGEND_H);
+        assert!(
+            s.contains(&format!(r#"width="{w:.0}" height="{h:.0}""#)),
+            "{s}"
+        );
+        // Titles: A and B side by side in the first row, C under A.
+        let title = |t: &str| -> (f64, f64) {
+            let l = s
+                .lines()
+                .find(|l| l.ends_with(&format!(">{t}</text>")))
+                .unwrap();
+            let num = |k: &str| -> f64 {
+                let i = l.find(k).unwrap() + k.len();
+                l[i..].split('"').next().unwrap().parse().unwrap()
+            };
+            (num(" x=\""), num(" y=\""))
+        };
+        let (a, b, c) = (title("A"), title("B"), title("C"));
+        assert_eq!(a.1, b.1);
+        assert_eq!(b.0 - a.0, PANEL_W);
+        assert_eq!(c.0, a.0);
+        assert_eq!(c.1 - a.1, PANEL_H);
+        // One row: `figure`.
+        assert!(figure(&[p("A"), p("B"), p("C")]).contains(&format!(
+            r#"width="{:.0}" height="{:.0}""#,
+            3.0 * PANEL_W,
+            PANEL_H + LEGEND_H
+        )));
+    }
+
+    #[test]
+    fn a_category_axis_has_whole_ticks_only() {
+        let x_ticks = |whole: bool| -> Vec<String> {
+            let p = Panel {
+                lines: vec![Line {
+                    label: "l".into(),
+                    points: vec![(0.0, 0.0), (1.0, 10.0)],
+                }],
+                x_whole: whole,
+                ..Default::default()
+            };
+            figure(&[p])
+                .lines()
+                .filter(|l| l.starts_with("<line") && l.contains("text-anchor=\"middle\""))
+                .filter_map(|l| {
+                    let t = l.rsplit_once("\">")?.1;
+                    Some(t.trim_end_matches("</text>").to_string())
+                })
+                .collect()
+        };
+        assert_eq!(x_ticks(true), ["0", "1"]);
+        assert!(x_ticks(false).contains(&"0.2".to_string()));
+    }
+
+    #[test]
+    fn small_and_large_ticks_keep_their_digits() {
+        assert_eq!(fmt_tick(1.5e-4), "1.5e-4");
+        assert_eq!(fmt_tick(2e-4), "2e-4");
+        assert_eq!(fmt_tick(-1.25e-5), "-1.25e-5");
+        assert_eq!(fmt_tick(3e6), "3e6");
+        assert_eq!(fmt_tick(0.05), "0.05");
+        assert_eq!(fmt_tick(12.0), "12");
     }
 
     #[test]
