@@ -89,13 +89,20 @@ impl Cell {
         }
         let mut flags: Vec<String> = plan.train_args.clone();
         flags.extend(self.method.args.iter().cloned());
-        // Train conditions: the value at this cell's point, the base value elsewhere.
+        // Train conditions: the value at this cell's point, the base value elsewhere; at a
+        // method condition's value the replacing preset runs with its own settings (the base
+        // values describe the method it replaces: `3dgs`'s `--init random` is not vanilla
+        // 3DGS's unit cube).
+        let replaced = self
+            .point
+            .is_some_and(|(pc, _)| plan.conditions[pc].on == Target::Method);
         for (ci, c) in plan.conditions.iter().enumerate() {
             if c.on != Target::Train || c.flag == ITERS || !c.acts_on(&self.method.name) {
                 continue;
             }
             let v = match self.point {
                 Some((pc, vi)) if pc == ci => Some(&c.values[vi]),
+                _ if replaced => None,
                 _ => c.base.as_ref(),
             };
             if let Some(v) = v {

@@ -544,3 +544,33 @@ fn the_charbonnier_only_variant_is_unispine_without_spwm_with_plain_charbonnier(
     same.loss.data_term = preset.loss.data_term;
     assert_eq!(same, preset);
 }
+
+#[test]
+fn a_replacing_preset_runs_with_its_own_settings() {
+    // In `gap`, the init and threshold axes have the `3dgs` preset's values as their base;
+    // those are not vanilla 3DGS's (unit cube, 2e-4), so its cells must not receive them.
+    let p = Plan::load("gap", &TrainSchema::of_train()).unwrap();
+    let cs = crate::reproduce::cell::cells(&p);
+    let args = |dir: &str| {
+        cs.iter()
+            .find(|c| c.dataset == "ct-crop" && c.seed == 0 && c.method_dir(&p) == dir)
+            .unwrap()
+            .train_args(&p)
+    };
+    let has = |a: &[String], f: &str, v: &str| a.windows(2).any(|w| w[0] == f && w[1] == v);
+    let vanilla = args("3dgs@preset=3dgs-vanilla");
+    assert!(has(&vanilla, "--method", "3dgs-vanilla"), "{vanilla:?}");
+    assert!(
+        !vanilla
+            .iter()
+            .any(|a| a == "--init" || a == "--grad-threshold"),
+        "{vanilla:?}"
+    );
+    // Every other 3dgs cell keeps the base values of the axes it is not on.
+    let base = args("3dgs");
+    assert!(has(&base, "--init", "random") && has(&base, "--grad-threshold", "0.00015"));
+    let cube = args("3dgs@init=unit-cube");
+    assert!(has(&cube, "--init", "unit-cube") && has(&cube, "--grad-threshold", "0.00015"));
+    let thr = args("3dgs@upstream-grad-threshold=0.0002");
+    assert!(has(&thr, "--init", "random") && has(&thr, "--grad-threshold", "0.0002"));
+}
