@@ -1,5 +1,7 @@
 //! Records the git commit of a checkout as `UNISPINE_GIT_COMMIT` (provenance of reproduce
-//! results). Outside a checkout, or without git, nothing is set.
+//! results), with `-dirty` appended when the files that build the binary (`src/`, `build.rs`,
+//! `Cargo.toml`, `Cargo.lock`) differ from that commit. Outside a checkout, or without git,
+//! nothing is set.
 
 use std::path::Path;
 use std::process::Command;
@@ -14,10 +16,24 @@ fn git(args: &[&str]) -> Option<String> {
 
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
+    // An edit of the sources makes the tree dirty (or clean again).
+    for p in ["src", "Cargo.toml", "Cargo.lock"] {
+        println!("cargo:rerun-if-changed={p}");
+    }
     let Some(commit) = git(&["rev-parse", "HEAD"]) else {
         return;
     };
-    println!("cargo:rustc-env=UNISPINE_GIT_COMMIT={commit}");
+    let changed = ["src", "build.rs", "Cargo.toml", "Cargo.lock"];
+    let status = git(&[
+        &["status", "--porcelain", "--untracked-files=all", "--"][..],
+        &changed[..],
+    ]
+    .concat());
+    let dirty = match status {
+        Some(s) if !s.is_empty() => "-dirty",
+        _ => "",
+    };
+    println!("cargo:rustc-env=UNISPINE_GIT_COMMIT={commit}{dirty}");
     // Rebuild when HEAD moves: the HEAD file and the branch it points to (loose or packed).
     if let Some(head) = git(&["rev-parse", "--git-path", "HEAD"]) {
         println!("cargo:rerun-if-changed={head}");

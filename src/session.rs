@@ -75,6 +75,15 @@ pub fn run(
     drive(m.as_mut(), rec, dir.as_ref(), ctl, on_event)
 }
 
+/// An error when the run in `dir` cannot be resumed (an FDK run is one pass), from its
+/// `config.json` alone: checked before a dataset is looked for.
+pub fn check_resumable(dir: &Path) -> Result<()> {
+    match Config::read(&RunDir::open(dir)?)? {
+        Config::Fdk => Err(crate::method::fdk::Fdk::not_resumable()),
+        _ => Ok(()),
+    }
+}
+
 /// Continue the stopped run in `dir` (its `config.json` and `checkpoint.bin`) on `ds`.
 pub fn resume(
     dir: &Path,

@@ -390,3 +390,22 @@ fn tensorf_trains_and_saves_a_numpy_readable_model() {
         );
     }
 }
+
+/// An FDK run is one pass: `--resume` on its folder is an error saying so (exit 1), and the
+/// folder is left as it was.
+#[test]
+fn an_fdk_run_is_not_resumed() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    phantom(d, 32, 8, 4, 1);
+    ok(
+        &["train", "--data", "ph", "--method", "fdk", "--out", "f"],
+        d,
+    );
+    let before = std::fs::read(d.join("f/metrics.json")).unwrap();
+    let o = unispine(&["train", "--resume", "f"], d);
+    assert_eq!(o.status.code(), Some(1));
+    let e = common::cli::text(&o);
+    assert!(e.contains("FDK") && e.contains("nothing to resume"), "{e}");
+    assert_eq!(std::fs::read(d.join("f/metrics.json")).unwrap(), before);
+}

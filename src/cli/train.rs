@@ -83,6 +83,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             {
                 bail!("--resume continues the run with its own config.json: give only --data and --threads");
             }
+            session::check_resumable(run)?;
             let data = match (&args.data, RunDir::open(run)?.dataset_path()?) {
                 (Some(d), _) => d.clone(),
                 (None, Some(d)) => d,

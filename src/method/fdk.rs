@@ -49,7 +49,8 @@ impl<'a> Fdk<'a> {
         })
     }
 
-    fn not_resumable() -> Error {
+    /// The error of `--resume` on an FDK run.
+    pub fn not_resumable() -> Error {
         Error::invalid(
             "--resume",
             "an FDK run: FDK runs in one pass, nothing to resume (train it again with \

@@ -193,35 +193,6 @@ impl RunDir {
         self.read_json(CONFIG, "config")
     }
 
-    /// Whether the folder holds a neural-field run (its `config.json` names a field preset):
-    /// those resume through [`crate::session::resume`].
-    pub fn is_field_run(&self) -> Result<bool> {
-        let v: serde_json::Value = self.read_json(CONFIG, "config")?;
-        Ok(v.get("preset").is_some_and(|p| p.is_string()))
-    }
-
-    /// An error when the folder does not hold a Gaussian run to resume: an FDK run (one pass,
-    /// nothing to resume) or a neural-field run (resumed by [`crate::session::resume`]),
-    /// recognised by its `config.json`.
-    pub fn check_resumable(&self) -> Result<()> {
-        let v: serde_json::Value = self.read_json(CONFIG, "config")?;
-        let why = match (v.get("preset").and_then(|p| p.as_str()), v.get("method")) {
-            (Some(p), _) => {
-                format!("a `{p}` neural-field run: resume it with `unispine train --resume`")
-            }
-            (None, Some(m)) if m == "fdk" => {
-                "an FDK run: FDK runs in one pass, nothing to resume (train it again with \
-                 `unispine train --method fdk`)"
-                    .to_string()
-            }
-            _ => return Ok(()),
-        };
-        Err(Error::invalid(
-            "--resume",
-            format!("{} holds {why}", self.root.display()),
-        ))
-    }
-
     /// The dataset folder recorded in `config.json` (`data`): absolute as written by `train`;
     /// a relative path (older runs) is taken relative to the run folder, else to the current
     /// folder. `None` when the config names none.
@@ -365,25 +336,6 @@ impl RunDir {
 mod tests {
     use super::*;
 
-    #[test]
-    fn an_fdk_folder_is_not_resumable() {
-        let dir = tempfile::tempdir().unwrap();
-        let rd = RunDir::create(dir.path()).unwrap();
-        std::fs::write(rd.path(CONFIG), r#"{"method": "fdk"}"#).unwrap();
-        let e = rd.check_resumable().unwrap_err().to_string();
-        assert!(
-            e.contains("--resume") && e.contains("nothing to resume"),
-            "{e}"
-        );
-        assert!(!rd.is_field_run().unwrap());
-        std::fs::write(
-            rd.path(CONFIG),
-            r#"{"preset": "naf", "method": "naf (reduced)"}"#,
-        )
-        .unwrap();
-        assert!(rd.is_field_run().unwrap());
-        assert!(rd.check_resumable().is_err());
-    }
     use crate::densify::TrainState;
     use crate::optim::AdamConfig;
 
