@@ -227,7 +227,7 @@ fn task_indices_outside_the_plan_are_refused() {
     for t in ["-1", "1", "99", "x"] {
         refused(
             &reproduce(&[p, "--task", t, "--out", "o"], d.path()),
-            &["invalid --task", "0..=0"],
+            &["invalid `--task`", "0..=0"],
         );
     }
     let r = run_limited(
@@ -237,7 +237,7 @@ fn task_indices_outside_the_plan_are_refused() {
         MEM_MIB,
         SECS,
     );
-    refused(&r, &["invalid SLURM_ARRAY_TASK_ID"]);
+    refused(&r, &["invalid `SLURM_ARRAY_TASK_ID`"]);
     assert!(!d.path().join("o").exists());
 }
 

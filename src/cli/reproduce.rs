@@ -7,9 +7,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 
-use unispine::reproduce::aggregate;
 use unispine::reproduce::plan::{Plan, TrainSchema, BUILTIN};
 use unispine::reproduce::run::{self, Outcome, RunEvent, RunOptions};
+use unispine::reproduce::{aggregate, command};
 
 /// Arguments of `unispine reproduce`.
 #[derive(Debug, clap::Args)]
@@ -91,67 +91,19 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    let base_dir = if std::path::Path::new(plan_arg).is_file() {
-        std::path::Path::new(plan_arg)
-            .parent()
-            .map(|p| p.to_path_buf())
-            .unwrap_or_default()
-    } else {
-        PathBuf::from(".")
-    };
-    let base_dir = if base_dir.as_os_str().is_empty() {
-        PathBuf::from(".")
-    } else {
-        base_dir
-    };
     let task = match &args.task {
         None => None,
-        Some(given) => {
-            let (what, v) = match given {
-                Some(v) => ("--task", v.clone()),
-                None => (
-                    "SLURM_ARRAY_TASK_ID",
-                    std::env::var("SLURM_ARRAY_TASK_ID")
-                        .context("--task without I needs SLURM_ARRAY_TASK_ID")?,
-                ),
-            };
-            match v.trim().parse::<usize>() {
-                Ok(i) if i < cells.len() => Some(i),
-                _ => anyhow::bail!(
-                    "invalid {what} `{v}`: a cell index in 0..={} (the plan has {} cells)",
-                    cells.len().saturating_sub(1),
-                    cells.len()
-                ),
-            }
-        }
+        Some(given) => Some(command::task_index(given.as_deref(), cells.len())?),
     };
-    let cores = std::env::var("SLURM_CPUS_PER_TASK")
-        .ok()
-        .and_then(|v| v.parse::<usize>().ok())
-        .unwrap_or_else(|| {
-            std::thread::available_parallelism()
-                .map(|n| n.get())
-                .unwrap_or(1)
-        });
     let opts = RunOptions {
         out: out.clone(),
         jobs: args.jobs,
         bin: std::env::current_exe().context("locating the unispine binary")?,
-        base_dir,
-        cores,
+        base_dir: command::base_dir(plan_arg),
+        cores: command::cores(),
         only: task.map(|t| vec![t]),
     };
     if args.emit_slurm {
-        let abs = |p: &std::path::Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
-        let plan_ref = if unispine::reproduce::plan::builtin(plan_arg).is_some() {
-            plan_arg.clone()
-        } else {
-            abs(std::path::Path::new(plan_arg)).display().to_string()
-        };
-        // Paths that cannot be written into a script are refused before anything is built.
-        unispine::reproduce::slurm::sh_path("--out", &abs(&out))?;
-        unispine::reproduce::slurm::sh_path("PLAN", &abs(std::path::Path::new(plan_arg)))?;
-        std::fs::create_dir_all(&out).with_context(|| out.display().to_string())?;
         let mut on_event = |e: &RunEvent| {
             if let RunEvent::DatasetBuilding { name } = e {
                 eprintln!("dataset {name}: building");
@@ -159,16 +111,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
                 eprintln!("dataset {name}: skipped (optional): {reason}");
             }
         };
-        for d in &plan.dataset_builds() {
-            run::prepare_dataset(d, &opts, &mut on_event)?;
-        }
-        let submit = unispine::reproduce::slurm::write_scripts(
-            &plan,
-            &abs(&opts.bin),
-            &plan_ref,
-            &abs(&out),
-            &abs(&opts.base_dir),
-        )?;
+        let submit = command::emit_slurm(&plan, plan_arg, &opts, &mut on_event)?;
         println!(
             "{} cells as a Slurm job array ({} cpus, {} per task); submit with: sh {}",
             cells.len(),
@@ -241,32 +184,25 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
             return Ok(());
         }
         if sum.trained > 0 {
-            let overhead = sum.total_wall_s - sum.cells_wall_s;
-            let line = format!(
-                "Harness: {} cells trained, {} kept, {} failed; the runs took {:.1} s of wall \
-                 time, the whole command {:.1} s with {} job(s){}.\n",
-                sum.trained,
-                sum.kept,
-                sum.failed,
-                sum.cells_wall_s,
-                sum.total_wall_s,
-                args.jobs,
-                if args.jobs == 1 {
-                    format!(
-                        " (datasets and harness: {:.1} s, {:.2} % of the runs' time)",
-                        overhead,
-                        100.0 * overhead / sum.cells_wall_s.max(1e-9)
-                    )
-                } else {
-                    String::new()
-                }
-            );
-            eprintln!("{}", line.trim_end());
-            extra = line;
+            extra = command::harness_line(&sum, args.jobs);
+            eprintln!("{}", extra.trim_end());
         }
     }
-    let (rows, verdicts) = aggregate::write_all(&plan, &out, &schema.method_help, &extra)?;
-    let md = std::fs::read_to_string(out.join("tables.md")).unwrap_or_default();
+    let header = unispine::reproduce::claims_doc::Header {
+        // The program by its name, not the path it was started from.
+        command: std::iter::once("unispine".to_string())
+            .chain(std::env::args().skip(1))
+            .collect::<Vec<_>>()
+            .join(" "),
+        machine: unispine::reproduce::provenance::Machine::detect(),
+    };
+    let doc = args.claims_doc.as_deref().map(|d| (d, &header));
+    let command::Tables {
+        rows,
+        verdicts,
+        markdown: md,
+    } = command::write_tables(&plan, &out, &schema.method_help, &extra, doc)
+        .context("writing the tables")?;
     // Print the tables and verdicts (everything before the method descriptions).
     let cut = md.find("## What each method row runs").unwrap_or(md.len());
     println!("{}", md[..cut].trim_end());
@@ -283,16 +219,6 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
         );
     }
     if let Some(doc) = &args.claims_doc {
-        let header = unispine::reproduce::claims_doc::Header {
-            // The program by its name, not the path it was started from.
-            command: std::iter::once("unispine".to_string())
-                .chain(std::env::args().skip(1))
-                .collect::<Vec<_>>()
-                .join(" "),
-            machine: unispine::reproduce::provenance::Machine::detect(),
-        };
-        let text = unispine::reproduce::claims_doc::render(&plan, &rows, &header);
-        std::fs::write(doc, text).with_context(|| format!("--claims-doc {}", doc.display()))?;
         println!("claims document: {}", doc.display());
     }
     let missing = aggregate::missing(&rows);

@@ -20,6 +20,7 @@
 pub mod aggregate;
 pub mod cell;
 pub mod claims_doc;
+pub mod command;
 pub mod compactness;
 pub mod holds;
 pub mod magnitude;

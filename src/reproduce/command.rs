@@ -1,0 +1,185 @@
+//! What `unispine reproduce` does between reading its flags and printing: where a plan file's
+//! relative paths start, which cell a Slurm array task runs, how many cores the cells share,
+//! writing a Slurm job array, the harness's own line, and the tables and claims document built
+//! from the finished cells. The front end maps flags to these calls and events to lines.
+
+use std::path::{Path, PathBuf};
+
+use super::aggregate::{self, Row};
+use super::claims_doc::{self, Header};
+use super::plan::Plan;
+use super::run::{self, RunEvent, RunOptions, RunSummary};
+use super::verdict::Verdict;
+use crate::error::{Error, Result};
+
+/// The folder a plan's relative paths start from: the plan file's folder, or the current
+/// folder for a built-in plan (`plan_arg` is what the user gave: a name or a file).
+pub fn base_dir(plan_arg: &str) -> PathBuf {
+    let p = Path::new(plan_arg);
+    match p.parent() {
+        Some(d) if p.is_file() && !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// The cell an array task runs: `given` (from `--task I`), else `SLURM_ARRAY_TASK_ID`; an
+/// error names the source and the allowed range.
+pub fn task_index(given: Option<&str>, n_cells: usize) -> Result<usize> {
+    let (what, v) = match given {
+        Some(v) => ("--task", v.to_string()),
+        None => (
+            "SLURM_ARRAY_TASK_ID",
+            std::env::var("SLURM_ARRAY_TASK_ID")
+                .map_err(|_| Error::invalid("--task", "without I needs SLURM_ARRAY_TASK_ID"))?,
+        ),
+    };
+    match v.trim().parse::<usize>() {
+        Ok(i) if i < n_cells => Ok(i),
+        _ => Err(Error::invalid(
+            what,
+            format!(
+                "`{v}` is not a cell index in 0..={} (the plan has {n_cells} cells)",
+                n_cells.saturating_sub(1)
+            ),
+        )),
+    }
+}
+
+/// The cores the cells share: `SLURM_CPUS_PER_TASK` inside a Slurm task, else the machine's.
+pub fn cores() -> usize {
+    std::env::var("SLURM_CPUS_PER_TASK")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
+/// Write the Slurm job array of `plan` (one task per cell, a dependent collect job) into
+/// `opts.out`, after building its datasets once; returns the `submit.sh` to run. Paths that
+/// cannot be written into a script are refused before anything is built.
+pub fn emit_slurm(
+    plan: &Plan,
+    plan_arg: &str,
+    opts: &RunOptions,
+    on_event: &mut dyn FnMut(&RunEvent),
+) -> Result<PathBuf> {
+    let abs = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    let plan_ref = if super::plan::builtin(plan_arg).is_some() {
+        plan_arg.to_string()
+    } else {
+        abs(Path::new(plan_arg)).display().to_string()
+    };
+    super::slurm::sh_path("--out", &abs(&opts.out))?;
+    super::slurm::sh_path("PLAN", &abs(Path::new(plan_arg)))?;
+    std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
+    for d in &plan.dataset_builds() {
+        run::prepare_dataset(d, opts, on_event)?;
+    }
+    super::slurm::write_scripts(
+        plan,
+        &abs(&opts.bin),
+        &plan_ref,
+        &abs(&opts.out),
+        &abs(&opts.base_dir),
+    )
+}
+
+/// The harness's line for `tables.md` and the terminal after a run that trained cells (with
+/// one job, the datasets' and harness's share of the runs' time).
+pub fn harness_line(sum: &RunSummary, jobs: usize) -> String {
+    let overhead = sum.total_wall_s - sum.cells_wall_s;
+    format!(
+        "Harness: {} cells trained, {} kept, {} failed; the runs took {:.1} s of wall time, the \
+         whole command {:.1} s with {} job(s){}.\n",
+        sum.trained,
+        sum.kept,
+        sum.failed,
+        sum.cells_wall_s,
+        sum.total_wall_s,
+        jobs,
+        if jobs == 1 {
+            format!(
+                " (datasets and harness: {:.1} s, {:.2} % of the runs' time)",
+                overhead,
+                100.0 * overhead / sum.cells_wall_s.max(1e-9)
+            )
+        } else {
+            String::new()
+        }
+    )
+}
+
+/// What [`write_tables`] wrote.
+pub struct Tables {
+    pub rows: Vec<Row>,
+    pub verdicts: Vec<Verdict>,
+    /// The text of `tables.md`.
+    pub markdown: String,
+}
+
+/// `results.csv`, `results.json` and `tables.md` from the cells in `out` (`extra`: a line for
+/// `tables.md`, e.g. [`harness_line`]), and the claims document at `claims_doc` when given.
+pub fn write_tables(
+    plan: &Plan,
+    out: &Path,
+    preset_help: &[(String, String)],
+    extra: &str,
+    claims_doc: Option<(&Path, &Header)>,
+) -> Result<Tables> {
+    let (rows, verdicts) = aggregate::write_all(plan, out, preset_help, extra)?;
+    let md_path = out.join("tables.md");
+    let markdown = crate::fsio::read_text_bounded(&md_path, crate::fsio::MAX_TEXT_BYTES)?;
+    if let Some((doc, header)) = claims_doc {
+        let text = claims_doc::render(plan, &rows, header);
+        crate::fsio::write_atomic(doc, text.as_bytes())?;
+    }
+    Ok(Tables {
+        rows,
+        verdicts,
+        markdown,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_plan_file_s_folder_is_the_base() {
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("p.toml");
+        std::fs::write(&f, "").unwrap();
+        assert_eq!(base_dir(f.to_str().unwrap()), dir.path());
+        assert_eq!(base_dir("quick"), PathBuf::from("."));
+        // A file in the current folder, and a name that is not a file.
+        assert_eq!(base_dir("no/such/plan.toml"), PathBuf::from("."));
+    }
+
+    #[test]
+    fn a_task_index_is_checked_against_the_cells() {
+        assert_eq!(task_index(Some("3"), 4).unwrap(), 3);
+        assert_eq!(task_index(Some(" 0 "), 1).unwrap(), 0);
+        for (v, n) in [("4", 4), ("-1", 4), ("x", 4), ("0", 0)] {
+            let e = task_index(Some(v), n).unwrap_err().to_string();
+            assert!(
+                e.contains("--task") && e.contains(&format!("{n} cells")),
+                "{e}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_harness_line_gives_the_overhead_with_one_job() {
+        let s = RunSummary {
+            cells: 3,
+            kept: 1,
+            trained: 2,
+            failed: 0,
+            cells_wall_s: 100.0,
+            total_wall_s: 101.0,
+        };
+        let one = harness_line(&s, 1);
+        assert!(one.contains("1.0 s, 1.00 % of the runs' time"), "{one}");
+        assert!(!harness_line(&s, 2).contains('%'));
+    }
+}
