@@ -1,11 +1,23 @@
 //! What one training iteration of any method did ([`Step`]): the one step record of the
 //! Gaussian trainer ([`crate::train::Trainer::step`]) and the neural-field trainer
 //! ([`crate::field::train::FieldTrainer::step`]), read by the session driver
-//! ([`crate::session`]) for `log.csv` and the progress events.
+//! ([`crate::session`]) for `log.csv` and the progress events; and what an evaluation during
+//! training found ([`EvalPoint`], kept by `metrics.json` and by checkpoints).
 
 use crate::densify::DensifyReport;
 use crate::eval::EvalResult;
 use crate::loss::LossValue;
+
+/// One evaluation point of `metrics.json` (and of a checkpoint, so that a resumed run keeps
+/// its history).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EvalPoint {
+    pub iteration: usize,
+    pub psnr: f64,
+    pub ssim: f64,
+    /// Gaussians of the evaluated model (before that iteration's densification).
+    pub n_gaussians: usize,
+}
 
 /// Which terms of [`Step::loss`] a method computes (the others print as `0` in `log.csv`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -229,3 +229,34 @@ fn the_checker_sees_a_wrong_name() {
     assert!(path_exists("render/{project,tiles}.rs") && !path_exists("render/{project,nope}.rs"));
     assert!(!has_word("pub struct MetricsX {", "Metrics"));
 }
+
+/// Every source file of the library and the front end over 600 lines says why in its module
+/// documentation (a line with "600 lines").
+#[test]
+fn a_long_file_says_why_in_its_header() {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                walk(&p, out);
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                out.push(p);
+            }
+        }
+    }
+    let mut files = Vec::new();
+    walk(&root().join("src"), &mut files);
+    let mut silent = Vec::new();
+    for f in &files {
+        let text = std::fs::read_to_string(f).unwrap();
+        let header: Vec<&str> = text.lines().take_while(|l| l.starts_with("//!")).collect();
+        if text.lines().count() > 600 && !header.iter().any(|l| l.contains("600 lines")) {
+            silent.push(f.strip_prefix(root()).unwrap().display().to_string());
+        }
+    }
+    assert!(files.len() > 50, "found {} source files", files.len());
+    assert!(
+        silent.is_empty(),
+        "over 600 lines without a reason: {silent:?}"
+    );
+}

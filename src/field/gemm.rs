@@ -36,6 +36,10 @@
 //!
 //! Generic over [`Real`]: f32 runs the blocked kernels, f64 (the gradient checks) the plain
 //! loops with the same operation order.
+//!
+//! Longer than 600 lines: the one kernel in its three compilations (generic scalar / AVX2 and
+//! AVX-512 intrinsics) with the packing each tile shape needs, side by side so that the tile
+//! shapes stay next to the measurements that chose them.
 
 use std::any::TypeId;
 use std::cell::RefCell;

@@ -39,6 +39,9 @@
 //! loop over the lanes, compiled for each instruction set (`project/blocks.rs`): every lane
 //! performs the per-Gaussian operations ([`project_geom`], `geom_core`, `backward_geom`), so
 //! every path gives the same bits.
+//!
+//! Longer than 600 lines: the forward and the backward of Eqs. (1)-(3) for one Gaussian stay
+//! side by side, each backward step beside the forward step it differentiates.
 
 #![allow(clippy::needless_range_loop)] // small fixed-size matrix loops read best indexed
 

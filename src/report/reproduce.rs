@@ -3,6 +3,8 @@
 //! method, every seed as a dot), test PSNR against the Gaussian count, training curves with a
 //! band over seeds, and the stability map. `report.html` is one self-contained page (inline
 //! SVG, no script, no server).
+//!
+//! Over 600 lines with its tests (the page writer itself is about 560).
 
 use std::fmt::Write as _;
 use std::path::Path;

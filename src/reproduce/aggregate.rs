@@ -2,6 +2,9 @@
 //! `config.json`, `cell.json`), written as `results.csv` / `results.json`, and `tables.md`:
 //! per dataset mean +- sd over seeds with n, the paper's numbers beside the matching rows, the
 //! verdicts, and the provenance of every row.
+//!
+//! Longer than 600 lines: every section of `tables.md` is written here from the same rows, one
+//! function per section, beside the row type they read.
 
 use std::fmt::Write as _;
 use std::path::Path;

@@ -6,12 +6,12 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::compact::Compaction;
-use super::run_dir::EvalPoint;
 use crate::densify::{Stats, TrainState};
 use crate::error::{Error, Result};
 use crate::gaussians::model::N_FEATURES;
 use crate::gaussians::Gaussians;
 use crate::optim::{Adam, AdamConfig, N_GROUPS};
+use crate::record::EvalPoint;
 use crate::render::RenderSettings;
 
 /// What a checkpoint belongs to. `train --resume` computes the same record from the run's

@@ -67,15 +67,7 @@ pub const RUN_FILES: [&str; 9] = [
 /// Header of `log.csv`.
 pub const LOG_HEADER: &str = "iteration,view,loss,data,ssim,psnr,n_gaussians,seconds\n";
 
-/// One evaluation point of `metrics.json`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct EvalPoint {
-    pub iteration: usize,
-    pub psnr: f64,
-    pub ssim: f64,
-    /// Gaussians of the evaluated model (before that iteration's densification).
-    pub n_gaussians: usize,
-}
+pub use crate::record::EvalPoint;
 
 /// `metrics.json` of a run (any method).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -29,6 +29,9 @@
 //! its value in [`TrainConfig::preset`], and one row here. Preset semantics: the preset (or
 //! `--config FILE`) gives every value, `--iters` and `--compress-schedule` act next, then each
 //! flag given replaces its one field, then the whole config is validated.
+//!
+//! Over 600 lines with its tests (the table and its macro are about 480): the tests check
+//! every row's flag, field and range.
 
 use std::path::PathBuf;
 

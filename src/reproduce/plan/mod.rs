@@ -46,6 +46,10 @@
 //! `--iters` from `field_iters`, and of `[train]` and the variant's flags only those a baseline
 //! takes ([`crate::baseline::FLAGS`]): the rest are Gaussian training settings. Every error names the file, the line and the key, and is raised
 //! before anything runs.
+//!
+//! Longer than 600 lines: the schema of every plan key and its parse-time check sit together,
+//! so that a key and its error message cannot drift apart; the parts that stand alone
+//! (conditions, `unispine train` flags, the tests) are files of their own.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

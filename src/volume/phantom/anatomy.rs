@@ -134,7 +134,7 @@ impl Layout {
     ) -> crate::error::Result<Layout> {
         let mut rng = ChaCha8Rng::seed_from_u64(noise::key(seed, PURPOSE_LAYOUT));
         let mut j = move || -> f64 { rng.random_range(-1.0..1.0) };
-        // Scale and torso outline (see paper_notes.md for the fit constraints).
+        // Scale and torso outline (see docs/phantom.md for the fit constraints).
         let (s, ax, ay, fat, ycanal0) = if fetal {
             let s = 0.15f64
                 .min(0.42 * size[0] / 150.0)

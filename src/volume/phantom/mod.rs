@@ -5,7 +5,7 @@
 //! cancellous core), intervertebral discs, the spinal canal, the posterior elements (pedicles
 //! and laminae as a ring, spinous and transverse processes), muscle / soft tissue, a fat rim and
 //! air outside. Values are linear attenuation coefficients in 1/mm at about 70 keV (see
-//! [`Tissue::mu`] and paper_notes.md for the sources). The fetal variant is a small torso in
+//! [`Tissue::mu`] and docs/phantom.md for the sources). The fetal variant is a small torso in
 //! amniotic fluid whose vertebrae are cartilage with three ossification centres each.
 //!
 //! Determinism: the per-vertebra parameters are drawn once, in a fixed order, from a
