@@ -426,3 +426,46 @@ fn resume_refuses_another_dataset_an_edited_config_and_a_corrupted_checkpoint() 
     let m = session::resume(d.path(), &ds, ctl(None), &mut quiet).unwrap();
     assert!(m.completed);
 }
+
+/// `eval --run` of a stopped run scores its checkpoint's model, even beside a `model.ply`
+/// (only a completed run's `model.ply` is its model).
+#[test]
+fn a_stopped_run_is_scored_from_its_checkpoint() {
+    let root = tempfile::tempdir().unwrap();
+    let cfg = schedule();
+    setup(root.path(), &cfg);
+    let train = |out: &str, extra: &[&str]| {
+        ok(bin()
+            .current_dir(root.path())
+            .args([
+                "train", "--data", "data", "--out", out, "--config", "cfg.json",
+            ])
+            .args(extra)
+            .output()
+            .unwrap())
+    };
+    train("full", &[]);
+    train("cut", &["--stop-after", "10"]);
+    let cut = root.path().join("cut");
+    assert_eq!(json(&cut.join("metrics.json"))["completed"], false);
+    let at10: u64 = log_rows(&cut)[10]
+        .rsplit(',')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    let full_n = json(&root.path().join("full/metrics.json"))["n_gaussians"]
+        .as_u64()
+        .unwrap();
+    assert_ne!(at10, full_n, "the two models must be told apart");
+    std::fs::copy(root.path().join("full/model.ply"), cut.join("model.ply")).unwrap();
+    ok(bin()
+        .current_dir(root.path())
+        .args(["eval", "--run", "cut"])
+        .output()
+        .unwrap());
+    assert_eq!(
+        json(&cut.join("eval.json"))["n_gaussians"].as_u64(),
+        Some(at10)
+    );
+}

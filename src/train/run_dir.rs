@@ -220,12 +220,6 @@ impl RunDir {
         fsio::write_atomic(&self.path(LOG), log.as_bytes())
     }
 
-    /// Read `log.csv`.
-    pub fn read_log(&self) -> Result<String> {
-        let p = self.path(LOG);
-        std::fs::read_to_string(&p).map_err(|e| Error::io(&p, e))
-    }
-
     /// Write `model.ply` with its render settings in the header.
     pub fn write_model(&self, g: &Gaussians<f32>, render: &RenderSettings) -> Result<()> {
         ply::write_ply_with_comments(&self.path(MODEL), g, &[render.to_ply_comment()])
@@ -344,6 +338,28 @@ mod tests {
         s.stats.grad_accum.iter_mut().for_each(|v| *v = 0.1);
         s.stats.denom.iter_mut().for_each(|v| *v = 7);
         s
+    }
+
+    #[test]
+    fn a_preview_is_render_gap_truth_clamped_to_bytes() {
+        let dir = tempfile::tempdir().unwrap();
+        let rd = RunDir::create(dir.path()).unwrap();
+        let img = |v: [f32; 6]| Image2d {
+            width: 3,
+            height: 2,
+            data: v.to_vec(),
+        };
+        let render = img([0.0, 0.5, 1.0, -1.0, 2.0, 0.2]);
+        let gt = img([1.0, 0.25, 0.0, 0.75, 0.1, 0.6]);
+        rd.write_preview("p.png", &render, &gt).unwrap();
+        let png = image::open(rd.path(PREVIEWS).join("p.png"))
+            .unwrap()
+            .to_luma8();
+        // 3 + 4 + 3 columns, 2 rows; v -> round(255 clamp(v, 0, 1)).
+        assert_eq!(png.dimensions(), (10, 2));
+        let row = |r: u32| -> Vec<u8> { (0..10).map(|c| png.get_pixel(c, r)[0]).collect() };
+        assert_eq!(row(0), [0, 128, 255, 0, 0, 0, 0, 255, 64, 0]);
+        assert_eq!(row(1), [0, 255, 51, 0, 0, 0, 0, 191, 26, 153]);
     }
 
     #[test]
