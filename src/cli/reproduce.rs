@@ -188,15 +188,19 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
             eprintln!("{}", extra.trim_end());
         }
     }
-    let header = unispine::reproduce::claims_doc::Header {
-        // The program by its name, not the path it was started from.
-        command: std::iter::once("unispine".to_string())
-            .chain(std::env::args().skip(1))
-            .collect::<Vec<_>>()
-            .join(" "),
-        machine: unispine::reproduce::provenance::Machine::detect(),
-    };
-    let doc = args.claims_doc.as_deref().map(|d| (d, &header));
+    // The machine is read only when a claims document is asked for.
+    let header = args
+        .claims_doc
+        .as_ref()
+        .map(|_| unispine::reproduce::claims_doc::Header {
+            // The program by its name, not the path it was started from.
+            command: std::iter::once("unispine".to_string())
+                .chain(std::env::args().skip(1))
+                .collect::<Vec<_>>()
+                .join(" "),
+            machine: unispine::reproduce::provenance::Machine::detect(),
+        });
+    let doc = args.claims_doc.as_deref().zip(header.as_ref());
     let command::Tables {
         rows,
         verdicts,

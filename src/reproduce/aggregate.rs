@@ -629,7 +629,7 @@ pub fn write_all(
     out: &Path,
     preset_help: &[(String, String)],
     extra: &str,
-) -> Result<(Vec<Row>, Vec<Verdict>)> {
+) -> Result<(Vec<Row>, Vec<Verdict>, String)> {
     let rows = gather(plan, out);
     let v = verdicts(plan, &rows);
     let w = |name: &str, text: &str| -> Result<()> {
@@ -638,8 +638,9 @@ pub fn write_all(
     };
     w("results.csv", &to_csv(&rows))?;
     w("results.json", &to_json(plan, &rows, &v))?;
-    w("tables.md", &tables_md(plan, &rows, &v, preset_help, extra))?;
-    Ok((rows, v))
+    let md = tables_md(plan, &rows, &v, preset_help, extra);
+    w("tables.md", &md)?;
+    Ok((rows, v, md))
 }
 
 #[cfg(test)]

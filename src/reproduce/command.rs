@@ -126,9 +126,7 @@ pub fn write_tables(
     extra: &str,
     claims_doc: Option<(&Path, &Header)>,
 ) -> Result<Tables> {
-    let (rows, verdicts) = aggregate::write_all(plan, out, preset_help, extra)?;
-    let md_path = out.join("tables.md");
-    let markdown = crate::fsio::read_text_bounded(&md_path, crate::fsio::MAX_TEXT_BYTES)?;
+    let (rows, verdicts, markdown) = aggregate::write_all(plan, out, preset_help, extra)?;
     if let Some((doc, header)) = claims_doc {
         let text = claims_doc::render(plan, &rows, header);
         crate::fsio::write_atomic(doc, text.as_bytes())?;
@@ -151,7 +149,7 @@ mod tests {
         std::fs::write(&f, "").unwrap();
         assert_eq!(base_dir(f.to_str().unwrap()), dir.path());
         assert_eq!(base_dir("quick"), PathBuf::from("."));
-        // A file in the current folder, and a name that is not a file.
+        // A name that is not a file.
         assert_eq!(base_dir("no/such/plan.toml"), PathBuf::from("."));
     }
 
