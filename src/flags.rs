@@ -4,8 +4,8 @@
 //! [`FlagSet::flags`]) and reproduction plans (which check a cell's arguments with
 //! [`parse_args`] before anything runs). The library itself carries no command-line parser.
 //!
-//! A named value ([`Choice`]) is declared with [`choice!`]: the enum, its names and the one
-//! line of help of each value come from one place.
+//! A named value ([`Choice`]) is declared with [`choice!`](crate::choice!): the enum, its names
+//! and the one line of help of each value come from one place.
 
 use std::path::PathBuf;
 

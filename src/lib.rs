@@ -25,7 +25,7 @@ pub mod error;
 pub mod fingerprint;
 /// Atomic file writes (temporary name + rename) and output-folder hygiene.
 pub mod fsio;
-/// Settings as command-line flags, declared as data (names, help, parsers, named choices).
+// Settings as command-line flags, declared as data (names, help, parsers, named choices).
 #[macro_use]
 pub mod flags;
 pub mod real;
