@@ -230,10 +230,8 @@ fn the_checker_sees_a_wrong_name() {
     assert!(!has_word("pub struct MetricsX {", "Metrics"));
 }
 
-/// Every source file of the library and the front end over 600 lines says why in its module
-/// documentation (a line with "600 lines").
-#[test]
-fn a_long_file_says_why_in_its_header() {
+/// Every `.rs` file below `src/`.
+fn source_files() -> Vec<PathBuf> {
     fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
         for e in std::fs::read_dir(dir).unwrap() {
             let p = e.unwrap().path();
@@ -246,6 +244,14 @@ fn a_long_file_says_why_in_its_header() {
     }
     let mut files = Vec::new();
     walk(&root().join("src"), &mut files);
+    files
+}
+
+/// Every source file of the library and the front end over 600 lines says why in its module
+/// documentation (a line with "600 lines").
+#[test]
+fn a_long_file_says_why_in_its_header() {
+    let files = source_files();
     let mut silent = Vec::new();
     for f in &files {
         let text = std::fs::read_to_string(f).unwrap();
@@ -258,5 +264,38 @@ fn a_long_file_says_why_in_its_header() {
     assert!(
         silent.is_empty(),
         "over 600 lines without a reason: {silent:?}"
+    );
+}
+
+/// No string literal on one line of `src/` holds a run of four or more spaces after text: the
+/// mark of a line break folded into a message by an edit (a message then prints with a gap of
+/// twenty spaces). Continuation lines (`\` at the end) are the way to wrap a long message.
+#[test]
+fn no_message_holds_a_folded_line_break() {
+    let gap = |s: &str| {
+        let t = s.trim_start();
+        t.find("    ").is_some_and(|i| !t[i..].trim().is_empty())
+    };
+    let files = source_files();
+    let mut found = Vec::new();
+    for f in &files {
+        let text = std::fs::read_to_string(f).unwrap();
+        for (n, line) in text.lines().enumerate() {
+            if line.trim_start().starts_with("//") {
+                continue;
+            }
+            // The parts between quotes (odd pieces); escaped quotes do not occur in a gap.
+            let inside = line.split('"').skip(1).step_by(2);
+            if inside.into_iter().any(gap) {
+                let rel = f.strip_prefix(root()).unwrap().display().to_string();
+                found.push(format!("{rel}:{}", n + 1));
+            }
+        }
+    }
+    assert!(gap("a {len}-byte file                      cannot"));
+    assert!(!gap("    indented") && !gap("a  b"));
+    assert!(
+        found.is_empty(),
+        "string literals with a folded line break: {found:?}"
     );
 }

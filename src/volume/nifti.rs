@@ -131,12 +131,12 @@ fn file_bytes(path: &Path) -> Result<Vec<u8>> {
             "dim",
             if gz {
                 format!(
-                    "{:?} voxels need {total} bytes after decompression; a {len}-byte gzip file                      cannot hold more than {most} (truncated file, or a false header)",
+                    "{:?} voxels need {total} bytes after decompression; a {len}-byte gzip file cannot hold more than {most} (truncated file, or a false header)",
                     h.dims
                 )
             } else {
                 format!(
-                    "truncated: {:?} voxels need {total} bytes (vox_offset + data), the file                      holds {len}",
+                    "truncated: {:?} voxels need {total} bytes (vox_offset + data), the file holds {len}",
                     h.dims
                 )
             },

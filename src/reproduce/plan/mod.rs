@@ -662,7 +662,7 @@ impl Plan {
             return Err(Error::invalid(
                 "--max-cells",
                 format!(
-                    "plan `{}` has {n} cells ({} datasets x {} methods (with their condition values) x {} sweep values x {}                      seeds), more than the {max} allowed; raise the limit with --max-cells {n}                      if that is meant",
+                    "plan `{}` has {n} cells ({} datasets x {} methods (with their condition values) x {} sweep values x {} seeds), more than the {max} allowed; raise the limit with --max-cells {n} if that is meant",
                     self.name,
                     self.datasets.len(),
                     self.method_points(),
