@@ -1,13 +1,13 @@
 //! Criterion benchmark of the rasterizer: forward and forward + backward (projection, tile
 //! binning, compositing) in f32 on the CT-like scenes of `unispine bench render`
-//! (`unispine::audit::bench::ct_like_scene`), 10k / 50k / 100k Gaussians at 256 x 256 and 512 x 512.
+//! (`unispine::bench::render::ct_like_scene`), 10k / 50k / 100k Gaussians at 256 x 256 and 512 x 512.
 //! Short measurement time; run with `cargo bench --bench render`. The naive reference and the
 //! blend throughput are printed by `unispine bench render`.
 
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use unispine::audit::bench::{bench_geometry, ct_like_scene};
+use unispine::bench::render::{bench_geometry, ct_like_scene};
 use unispine::image2d::Image2d;
 use unispine::render::{self, RenderSettings};
 

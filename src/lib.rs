@@ -102,8 +102,11 @@ pub mod reproduce;
 /// Tables of finished runs and the reproduction report (Markdown, HTML, SVG charts).
 pub mod report;
 
-/// Numerical audits: gradient checks against finite differences, benchmark scenes.
+/// Numerical audits: gradient checks against finite differences.
 pub mod audit;
+
+/// Benchmarks of every stage (scenes, timers, the figures `unispine bench` prints).
+pub mod bench;
 
 pub use error::{Error, Result};
 pub use real::Real;

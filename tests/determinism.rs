@@ -3,7 +3,7 @@
 //! tile order) on a CT-like scene of 3000 Gaussians at 96 x 96, in f32 (the training path) and
 //! f64 (the audit path).
 
-use unispine::audit::bench::{bench_geometry, ct_like_scene};
+use unispine::bench::render::{bench_geometry, ct_like_scene};
 use unispine::image2d::Image2d;
 use unispine::real::Real;
 use unispine::render::{self, ColorMode, RenderSettings};

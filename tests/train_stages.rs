@@ -3,7 +3,7 @@
 //! the benchmark runs on a dataset folder and on the phantom fallback.
 
 use tiny::{dataset, hidden, tiny};
-use unispine::audit::train_bench::{self, Clock};
+use unispine::bench::train::{self, Clock};
 use unispine::train::{Method, StageTimes, Trainer};
 mod common;
 use common::cli;
@@ -61,7 +61,7 @@ fn bench_amortises_densification_and_sums_to_the_step() {
     let ds = dataset();
     // From a model at schedule position 598: iteration 599 untimed, then 600..=602 timed, an
     // event at 600 (the preset densifies every 200 iterations in (500, 8000)).
-    let b = train_bench::time_train(&ds, 598, 3, Some(hidden().cast())).unwrap();
+    let b = train::time_train(&ds, 598, 3, Some(hidden().cast())).unwrap();
     assert_eq!(b.first_iteration, 600);
     assert_eq!(b.stages.steps, 3);
     assert_eq!(b.stages.n_densify_events, 1);
@@ -87,11 +87,11 @@ fn bench_amortises_densification_and_sums_to_the_step() {
     }
     // No event in the window (602..=604, after the untimed 601): one is timed on a copy of
     // the state.
-    let b = train_bench::time_train(&ds, 600, 3, Some(hidden().cast())).unwrap();
+    let b = train::time_train(&ds, 600, 3, Some(hidden().cast())).unwrap();
     assert_eq!(b.stages.n_densify_events, 0);
     assert!(b.densify_phase && b.densify_event.0 > 0.0 && b.densify_event.1 > 0.0);
     // Past the phase: nothing amortised.
-    let b = train_bench::time_train(&ds, 9000, 2, Some(hidden().cast())).unwrap();
+    let b = train::time_train(&ds, 9000, 2, Some(hidden().cast())).unwrap();
     assert!(!b.densify_phase);
     assert_eq!(b.densify_event, (0.0, 0.0));
     assert_eq!(b.per_iteration(Clock::Wall)[4], b.stages.wall.densify / 2.0);

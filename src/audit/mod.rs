@@ -1,19 +1,16 @@
 //! Numerical audits: gradient checks against central finite differences ([`gradcheck`] for the
-//! rasterizer, [`field`] for the neural-field baselines) and the
-//! benchmark scenes ([`bench`]). A gradient check of any stage reports [`Row`]s (stage, case,
+//! rasterizer, [`field`] for the neural-field baselines); the benchmarks live in
+//! [`crate::bench`]. A gradient check of any stage reports [`Row`]s (stage, case,
 //! variant, parameter group, errors), so a new stage adds its rows to the same table: write a
 //! `rows` function like [`gradcheck::rows`] and print it with the others in `unispine gradcheck`.
 //!
 //! [`gradcheck`]: crate::audit::gradcheck
 //! [`field`]: crate::audit::field
-//! [`bench`]: crate::audit::bench
 //! [`Row`]: crate::audit::Row
 //! [`gradcheck::rows`]: crate::audit::gradcheck::rows
 
-pub mod bench;
 pub mod field;
 pub mod gradcheck;
-pub mod train_bench;
 
 /// Relative error tolerance of every gradient check.
 pub const TOLERANCE: f64 = 1e-6;

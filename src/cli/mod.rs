@@ -1,8 +1,6 @@
 //! Command-line front end: one file per subcommand, each with its clap `Args` and `run`.
 
 pub mod bench;
-pub mod bench_field;
-pub mod bench_train;
 pub mod data;
 pub mod drr;
 pub mod eval;

@@ -29,8 +29,7 @@
 //! [`Projector::with_simd`]: crate::drr::Projector::with_simd
 //! [`Simd::Scalar`]: crate::simd::Simd::Scalar
 
-pub mod bench;
-mod grid;
+pub(crate) mod grid;
 mod lane_bands;
 mod lanes;
 mod padded_lanes;
@@ -117,7 +116,7 @@ pub fn project_views<R: Real>(
 
 /// A volume and a geometry checked once, projected for any number of angles.
 pub struct Projector<'a, R: Real> {
-    grid: Grid<'a, R>,
+    pub(crate) grid: Grid<'a, R>,
     geo: &'a ConeBeam,
     method: Method,
     simd: Simd,

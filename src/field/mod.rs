@@ -29,12 +29,11 @@
 //! [`gemm`]: crate::field::gemm
 //! [`render`]: crate::field::render
 //! [`train`]: crate::field::train
-//! [`bench`]: crate::field::bench
+//! [`bench`]: crate::bench::field
 //! [`FieldConfig::preset`]: crate::field::FieldConfig::preset
 //! [`Real`]: crate::real::Real
 
 pub mod act;
-pub mod bench;
 pub mod checkpoint;
 pub mod encode;
 pub mod gemm;

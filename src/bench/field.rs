@@ -3,7 +3,7 @@
 //! split into stages, and the peak memory of the full NAF configuration.
 //!
 //! Inputs are synthetic but shaped like a training iteration: the rays of random pixels of a
-//! 128 x 128 cone-beam view of the 256 mm benchmark box ([`crate::audit::bench::bench_geometry`]),
+//! 128 x 128 cone-beam view of the 256 mm benchmark box ([`crate::bench::render::bench_geometry`]),
 //! random targets, a freshly initialised field. Every figure is a time measured in the calling
 //! process; the ratios are formed by the caller from figures of the same run.
 
@@ -14,12 +14,12 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use super::mlp::Cache;
-use super::render::{self, Ray};
-use super::train::{Sampling, StageTimes, Workspace, RAYS_PER_BLOCK};
-use super::{Field, FieldConfig};
-use crate::audit::bench::bench_geometry;
+use crate::bench::render::bench_geometry;
 use crate::error::Result;
+use crate::field::mlp::Cache;
+use crate::field::render::{self, Ray};
+use crate::field::train::{Sampling, StageTimes, Workspace, RAYS_PER_BLOCK};
+use crate::field::{Field, FieldConfig};
 use crate::optim::FlatAdam;
 use crate::simd::Simd;
 use crate::timer::cpu_seconds;
@@ -96,7 +96,7 @@ pub fn time_mlp(cfg: &FieldConfig, simd: Simd, reps: usize) -> Result<MlpTiming>
     let flops: f64 = mlp
         .shape
         .iter()
-        .map(|&(i, o, _)| 3 * super::gemm::flops(rows, i, o))
+        .map(|&(i, o, _)| 3 * crate::field::gemm::flops(rows, i, o))
         .sum::<u64>() as f64;
     Ok(MlpTiming {
         rows,

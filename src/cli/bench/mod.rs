@@ -3,16 +3,16 @@
 //!
 //! Kinds:
 //! - `render`: forward and forward + backward of the rasterizer in f32 on the CT-like scenes of
-//!   [`unispine::audit::bench`], for each Gaussian count and square detector size; prints median
+//!   [`unispine::bench::render`], for each Gaussian count and square detector size; prints median
 //!   times, Gaussian-pixel blends per second, and the same throughput of the naive per-pixel
 //!   reference measured on a smaller case in the same run, scaled per blend; the SIMD path used
 //!   ([`unispine::simd::Simd::active`]) and the arithmetic limit of the work: blends x the kernels'
 //!   flops per blend over the peak f32 rate measured in the same run
 //!   ([`unispine::simd::peak_run`]), and the fraction of it reached; under each case, the CPU and
-//!   wall time of each phase ([`unispine::audit::bench::RENDER_PHASES`]) and the lanes the tile
+//!   wall time of each phase ([`unispine::bench::render::RENDER_PHASES`]) and the lanes the tile
 //!   kernels evaluated against the blends.
 //!
-//! - `field`: the neural-field baselines ([`unispine::field::bench`]): the peak f32 rate of
+//! - `field`: the neural-field baselines ([`unispine::bench::field`]): the peak f32 rate of
 //!   independent multiplies and adds on one and on all threads, the MLP forward + backward at
 //!   the NAF width (rows = the preset's rays x samples) in Gflop/s and as a fraction of that
 //!   peak (the widest path and the scalar path) and at the NeRF width (the widest path), each
@@ -20,21 +20,24 @@
 //!   after the full NAF configuration's iterations.
 //!
 //! - `train`: where one training iteration of the `unispine` preset goes
-//!   ([`unispine::audit::train_bench`]): ms and % of the step per stage at each detector size,
+//!   ([`unispine::bench::train`]): ms and % of the step per stage at each detector size,
 //!   CPU time, and the share outside the rasterizer against the 25 % target.
 //!
-//! - `drr`: the DRR projectors ([`unispine::drr::bench`]): per projector, view (AP, lateral) and
+//! - `drr`: the DRR projectors ([`unispine::bench::drr`]): per projector, view (AP, lateral) and
 //!   detector size, the first and the median extra view on each instruction set, the per-ray
 //!   loops (`scalar`, the implementation before the vector kernels) measured in the same run as
 //!   the reference of the speed-ups; rays/s, voxel steps or samples per second, peak resident
 //!   memory against the volume's size, and the target (0.05 s per 256^2 view on 2 cores) with
 //!   the fraction reached.
 
+mod field;
+mod train;
+
 use anyhow::{bail, Context};
 
 use std::time::Instant;
 
-use unispine::audit::bench::{
+use unispine::bench::render::{
     process_cpu_seconds, time_naive, time_render, RenderTiming, BOX_MM, RENDER_PHASES,
 };
 use unispine::render::composite;
@@ -106,8 +109,8 @@ pub struct BenchArgs {
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     match args.kind.as_str() {
         "render" => run_render(&args),
-        "field" => super::bench_field::run(&args),
-        "train" => super::bench_train::run(&args),
+        "field" => field::run(&args),
+        "train" => train::run(&args),
         "drr" => run_drr(&args),
         k => bail!("unknown benchmark kind `{k}` (available: render, field, train, drr)"),
     }
@@ -119,7 +122,7 @@ fn run_render(args: &BenchArgs) -> anyhow::Result<()> {
     } else {
         args.sizes.clone()
     };
-    unispine::audit::bench::check_render_cases(&args.gaussians, &sizes, args.reps)?;
+    unispine::bench::render::check_render_cases(&args.gaussians, &sizes, args.reps)?;
     println!(
         "render benchmark: CT-like box of {BOX_MM} mm, cone beam, f32, paper RIRF, {} threads, \
          median of {} reps",
@@ -254,7 +257,7 @@ fn print_phases(t: &RenderTiming) {
 }
 
 fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
-    use unispine::drr::bench::{time_case, BENCH_REPS, BENCH_SIZES, TARGET_S};
+    use unispine::bench::drr::{time_case, BENCH_REPS, BENCH_SIZES, TARGET_S};
     use unispine::drr::{MarchLanes, Method};
     use unispine::simd::Simd;
     let check = |flag: &str, v: usize, (lo, hi): (usize, usize)| {

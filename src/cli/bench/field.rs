@@ -1,9 +1,9 @@
-//! `unispine bench field`: prints the figures of [`unispine::field::bench`] and their ratios.
+//! `unispine bench field`: prints the figures of [`unispine::bench::field`] and their ratios.
 
 use anyhow::bail;
 
-use super::bench::BenchArgs;
-use unispine::field::bench::{peak, time_iteration, time_mlp};
+use super::BenchArgs;
+use unispine::bench::field::{peak, time_iteration, time_mlp};
 use unispine::field::{FieldConfig, PRESETS};
 use unispine::simd::Simd;
 

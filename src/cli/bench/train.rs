@@ -1,10 +1,10 @@
-//! `unispine bench train`: prints [`unispine::audit::train_bench`]'s stage breakdown of one
+//! `unispine bench train`: prints [`unispine::bench::train`]'s stage breakdown of one
 //! training iteration per detector size and the share outside the rasterizer.
 
 use anyhow::{bail, Context};
 
-use super::bench::BenchArgs;
-use unispine::audit::train_bench::{self, Clock, TrainBench};
+use super::BenchArgs;
+use unispine::bench::train::{self, Clock, TrainBench};
 use unispine::dataset::{store, Dataset};
 
 /// Default detector sizes.
@@ -27,7 +27,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     if args.data.is_some() && !args.sizes.is_empty() {
         bail!("--sizes cannot be used with --data (the dataset's detector is the size)");
     }
-    train_bench::check_train_cases(&sizes, iters, args.warmup, args.views)?;
+    train::check_train_cases(&sizes, iters, args.warmup, args.views)?;
     if let Err(e) = unispine::simd::Simd::from_env() {
         bail!("{e}");
     }
@@ -71,7 +71,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
                     n[1]
                 );
             }
-            train_bench::check_train_cases(&[n[0]], iters, args.warmup, args.views)
+            train::check_train_cases(&[n[0]], iters, args.warmup, args.views)
                 .with_context(|| format!("--data {}", d.display()))?;
             println!(
                 "dataset: {} ({} training views)",
@@ -105,9 +105,9 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
                     let (vol, mask, views) = (volume.clone(), args.mask.clone(), args.views);
                     let f: MakeDataset = Box::new(move || {
                         Ok(if ct {
-                            train_bench::ct_crop_dataset(&vol, &mask, s, views)?
+                            train::ct_crop_dataset(&vol, &mask, s, views)?
                         } else {
-                            train_bench::phantom_dataset(s, views)?
+                            train::phantom_dataset(s, views)?
                         })
                     });
                     (s, f)
@@ -117,7 +117,7 @@ pub fn run(args: &BenchArgs) -> anyhow::Result<()> {
     };
     for (size, make) in datasets {
         let ds = make().with_context(|| format!("building the dataset at {size}x{size}"))?;
-        let b = train_bench::time_train(&ds, args.warmup, iters, model.clone())?;
+        let b = train::time_train(&ds, args.warmup, iters, model.clone())?;
         print_case(&b);
     }
     Ok(())

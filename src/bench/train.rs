@@ -26,7 +26,7 @@ use crate::volume::attenuation::{HuConversion, Normalization};
 use crate::volume::phantom::{self, PhantomSpec};
 use crate::volume::{resample, Volume};
 
-use super::bench::process_cpu_seconds;
+use super::render::process_cpu_seconds;
 
 /// Allowed ranges of the training benchmark: square detector sizes (pixels per side), timed
 /// iterations, warm-up iterations and training views. A detector of 2048^2 with 100 views

@@ -12,8 +12,8 @@
 
 use std::time::Instant;
 
-use super::grid::clip_ray;
-use super::{siddon, trilinear, MarchLanes, Method, Projector};
+use crate::drr::grid::clip_ray;
+use crate::drr::{siddon, trilinear, MarchLanes, Method, Projector};
 use crate::error::Result;
 use crate::geometry::ConeBeam;
 use crate::real::Real;

@@ -1,0 +1,20 @@
+//! Benchmarks, one home for all of them: the scenes, the timers and the figures that
+//! `unispine bench` prints (its ratios are formed from figures of the same run) and the
+//! criterion benches in `benches/` use. The stages export kernels only; each file here times
+//! one stage:
+//!
+//! - [`render`]: the rasterizer (forward, backward, phases) on CT-like scenes, with the scene
+//!   and geometry every benchmark and the determinism tests share;
+//! - [`train`]: where one training iteration's time goes, stage by stage;
+//! - [`field`]: the neural-field baselines (peak f32 rate, the MLP's products, iterations);
+//! - [`drr`]: the DRR projectors on every instruction set.
+//!
+//! [`render`]: crate::bench::render
+//! [`train`]: crate::bench::train
+//! [`field`]: crate::bench::field
+//! [`drr`]: crate::bench::drr
+
+pub mod drr;
+pub mod field;
+pub mod render;
+pub mod train;
