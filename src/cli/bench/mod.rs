@@ -21,7 +21,7 @@
 //!
 //! - `train`: where one training iteration of the `unispine` preset goes
 //!   ([`unispine::bench::train`]): ms and % of the step per stage at each detector size,
-//!   CPU time, and the share outside the rasterizer against the 25 % target.
+//!   CPU time, and the share outside the rasterizer against its target (15 %).
 //!
 //! - `drr`: the DRR projectors ([`unispine::bench::drr`]): per projector, view (AP, lateral) and
 //!   detector size, the first and the median extra view on each instruction set, the per-ray
