@@ -115,7 +115,7 @@ fn bench_train_prints_the_stages_on_a_dataset_folder_and_the_phantom() {
         "densification",
         "bookkeeping",
         "CPU time",
-        "(target <= 25%)",
+        "(target <= 15%)",
     ] {
         assert!(out.contains(w), "missing `{w}`:\n{out}");
     }
