@@ -45,6 +45,7 @@ pub enum HuConversion {
 
 impl HuConversion {
     /// The converted value of one HU value.
+    #[inline]
     pub fn apply_one(self, hu: f64) -> f64 {
         match self {
             HuConversion::NafMu => {
@@ -77,9 +78,16 @@ impl HuConversion {
             ),
             HuConversion::None => return,
         };
-        vol.data.par_chunks_mut(1 << 16).for_each(|c| {
-            c.iter_mut()
-                .for_each(|v| *v = R::c(self.apply_one(v.f64())))
+        // The conversion is chosen once per block (not per voxel), so the loops vectorise; each
+        // voxel gets exactly `apply_one`'s operations.
+        vol.data.par_chunks_mut(1 << 16).for_each(|c| match self {
+            HuConversion::NafMu => c
+                .iter_mut()
+                .for_each(|v| *v = R::c(HuConversion::NafMu.apply_one(v.f64()))),
+            HuConversion::LinearClip => c
+                .iter_mut()
+                .for_each(|v| *v = R::c(HuConversion::LinearClip.apply_one(v.f64()))),
+            HuConversion::None => {}
         });
         vol.provenance.steps.push(step);
     }
