@@ -235,6 +235,24 @@ fn bad_input_names_the_field() {
     let e = fdk::reconstruct(&g, &angles, &bad).unwrap_err();
     assert!(matches!(e, Error::NonFinite { .. }), "{e}");
     assert!(e.to_string().contains("projection 1"), "{e}");
+    // Each of the three size checks on its own: a projection whose width alone, height alone,
+    // or pixel buffer alone disagrees with the detector (the fields of an image are public, so
+    // a caller can build one whose buffer does not match its size).
+    let (w, h) = (g.n_detector[1], g.n_detector[0]);
+    let n = w * h;
+    for (k, (pw, ph, len)) in [(w + 1, h, n), (w, h + 1, n), (w, h, n - 1)]
+        .into_iter()
+        .enumerate()
+    {
+        let mut bad = projs.clone();
+        bad[2] = Image2d {
+            width: pw,
+            height: ph,
+            data: vec![0.0; len],
+        };
+        let e = fdk::reconstruct(&g, &angles, &bad).unwrap_err();
+        assert!(e.to_string().contains("projections[2]"), "case {k}: {e}");
+    }
     g.mode = Mode::Parallel;
     let e = fdk::reconstruct(&g, &angles, &projs).unwrap_err();
     assert!(e.to_string().contains("mode"), "{e}");
