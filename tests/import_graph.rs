@@ -6,7 +6,8 @@
 //!
 //! Edges come from `crate::` and `super::` paths (brace groups expanded) outside comments and
 //! `#[cfg(test)] mod tests`; a path names the file of its longest prefix that is a module. The
-//! command-line front end (`src/main.rs`, `src/cli/`) is the binary, not the library: left out.
+//! command-line front end (`src/main.rs`, `src/cli/`) is the binary, not the library: it has no
+//! place in the pipeline's order, and is checked on its own for cycles (it has none).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -356,4 +357,29 @@ fn the_graph_sees_groups_super_and_cycles() {
     let order = texts_lib_order("pub mod e;\npub mod a;\npub mod d;");
     let up = back_up(&g, &order);
     assert_eq!(up, BTreeSet::from(["a/b.rs -> d.rs".to_string()]));
+}
+
+/// The front end (`src/main.rs` and `src/cli/`, the binary) has no import cycle between its
+/// files either: a command's parts are children of its module (`cli/bench/` holds the
+/// benchmark commands, reached from `cli/bench/mod.rs` by their bare names).
+#[test]
+fn the_front_end_has_no_import_cycle() {
+    let mut files = Vec::new();
+    rust_files(&src(), &mut files);
+    files.retain(|f| f == "main.rs" || f.starts_with("cli/"));
+    assert!(files.len() > 10, "front-end files: {files:?}");
+    let texts = files
+        .iter()
+        .map(|f| (f.clone(), std::fs::read_to_string(src().join(f)).unwrap()))
+        .collect();
+    let graph = edges(&files, &texts);
+    assert!(
+        graph.values().map(|e| e.len()).sum::<usize>() > 5,
+        "the front end's files import each other: {graph:?}"
+    );
+    let found = cycles(&graph);
+    assert!(
+        found.is_empty(),
+        "import cycles in the front end: {found:?}"
+    );
 }
