@@ -259,6 +259,25 @@ mod tests {
         assert_eq!(c.apply_one(500.0), 0.5);
     }
 
+    /// `apply` over more than one block gives each voxel its `apply_one` value (the value
+    /// checked by hand above) for each conversion, NaN kept.
+    #[test]
+    fn apply_gives_apply_one_for_every_voxel_and_conversion() {
+        let hu: Vec<f64> = (0..70_000).map(|k| (k % 4000) as f64 - 2048.0).collect();
+        for c in [HuConversion::NafMu, HuConversion::LinearClip] {
+            let mut v = vol(&hu);
+            v.data[65_537] = f64::NAN;
+            c.apply(&mut v);
+            for (k, (&got, &h)) in v.data.iter().zip(&hu).enumerate() {
+                if k == 65_537 {
+                    assert!(got.is_nan(), "{c:?}: NaN kept");
+                    continue;
+                }
+                assert_eq!(got, c.apply_one(h), "{c:?} voxel {k} (HU {h})");
+            }
+        }
+    }
+
     #[test]
     fn apply_records_steps_and_none_is_identity() {
         let mut v = vol(&[-1000.0, 0.0, 500.0]);
