@@ -25,6 +25,9 @@ pub mod error;
 pub mod fingerprint;
 /// Atomic file writes (temporary name + rename) and output-folder hygiene.
 pub mod fsio;
+// A typed document (headings, paragraphs, lists, tables) rendered as Markdown or HTML: what
+// `tables.md`, `docs/claims.md` and `report.html` are made of.
+pub mod doc;
 // Settings as command-line flags, declared as data (names, help, parsers, named choices).
 #[macro_use]
 pub mod flags;

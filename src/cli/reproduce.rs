@@ -204,12 +204,12 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
     let command::Tables {
         rows,
         verdicts,
-        markdown: md,
+        doc: tables,
     } = command::write_tables(&plan, &out, &schema.method_help, &extra, doc)
         .context("writing the tables")?;
     // Print the tables and verdicts (everything before the method descriptions).
-    let cut = md.find("## What each method row runs").unwrap_or(md.len());
-    println!("{}", md[..cut].trim_end());
+    let head = unispine::reproduce::tables::results_part(&tables).to_markdown();
+    println!("{}", head.trim_end());
     println!();
     for v in &verdicts {
         println!("verdict: {:<15} {}", v.word.as_str(), v.claim.text);
@@ -241,7 +241,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
     let charts = unispine::report::reproduce::write_report(
         &rows,
         &out,
-        &md,
+        &tables,
         plan.floor_db,
         unispine::report::holds::charts(&plan, &rows),
     )?;

@@ -10,6 +10,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use super::svg::{self, Band, Dot, ErrorBar, Line, Marker, Panel};
+use crate::doc::Doc;
 use crate::error::{Error, Result};
 use crate::reproduce::aggregate::Row;
 use crate::reproduce::verdict::mean_sd;
@@ -416,113 +417,12 @@ pub fn charts(rows: &[Row], out: &Path, floor_db: Option<f64>) -> Vec<(String, S
     v
 }
 
-/// Markdown (as written in `tables.md`: headings, paragraphs, lists, pipe tables) to HTML.
-pub fn markdown_to_html(md: &str) -> String {
-    let inline = |t: &str| -> String {
-        let e = svg::escape(t);
-        let mut out = String::new();
-        let mut code = false;
-        let mut bold = false;
-        let mut rest = e.as_str();
-        while !rest.is_empty() {
-            if let Some(r) = rest.strip_prefix("**") {
-                out.push_str(if bold { "</b>" } else { "<b>" });
-                bold = !bold;
-                rest = r;
-            } else if let Some(r) = rest.strip_prefix('`') {
-                out.push_str(if code { "</code>" } else { "<code>" });
-                code = !code;
-                rest = r;
-            } else {
-                let c = rest.chars().next().unwrap_or(' ');
-                out.push(c);
-                rest = &rest[c.len_utf8()..];
-            }
-        }
-        if code {
-            out.push_str("</code>");
-        }
-        if bold {
-            out.push_str("</b>");
-        }
-        out
-    };
-    let mut h = String::new();
-    let mut in_table = false;
-    let mut in_list = false;
-    let mut header_done = false;
-    for line in md.lines() {
-        let t = line.trim();
-        if t.starts_with('|') {
-            if in_list {
-                h.push_str("</ul>\n");
-                in_list = false;
-            }
-            if !in_table {
-                h.push_str("<table>\n");
-                in_table = true;
-                header_done = false;
-            }
-            let cells: Vec<&str> = t.trim_matches('|').split('|').map(|c| c.trim()).collect();
-            if cells
-                .iter()
-                .all(|c| c.chars().all(|ch| ch == '-' || ch == ':'))
-            {
-                header_done = true;
-                continue;
-            }
-            let tag = if header_done { "td" } else { "th" };
-            h.push_str("<tr>");
-            for c in cells {
-                let _ = write!(h, "<{tag}>{}</{tag}>", inline(c));
-            }
-            h.push_str("</tr>\n");
-            continue;
-        }
-        if in_table {
-            h.push_str("</table>\n");
-            in_table = false;
-        }
-        if let Some(item) = t.strip_prefix("- ") {
-            if !in_list {
-                h.push_str("<ul>\n");
-                in_list = true;
-            }
-            let _ = writeln!(h, "<li>{}</li>", inline(item));
-            continue;
-        }
-        if in_list {
-            h.push_str("</ul>\n");
-            in_list = false;
-        }
-        if t.is_empty() {
-            continue;
-        }
-        if let Some(x) = t.strip_prefix("### ") {
-            let _ = writeln!(h, "<h3>{}</h3>", inline(x));
-        } else if let Some(x) = t.strip_prefix("## ") {
-            let _ = writeln!(h, "<h2>{}</h2>", inline(x));
-        } else if let Some(x) = t.strip_prefix("# ") {
-            let _ = writeln!(h, "<h1>{}</h1>", inline(x));
-        } else {
-            let _ = writeln!(h, "<p>{}</p>", inline(t));
-        }
-    }
-    if in_table {
-        h.push_str("</table>\n");
-    }
-    if in_list {
-        h.push_str("</ul>\n");
-    }
-    h
-}
-
 /// Write the charts (and `more`, e.g. [`super::holds::charts`]) into `out/charts/` and
 /// `out/report.html`; returns the chart paths.
 pub fn write_report(
     rows: &[Row],
     out: &Path,
-    tables_md: &str,
+    tables: &Doc,
     floor_db: Option<f64>,
     more: Vec<(String, String, String)>,
 ) -> Result<Vec<std::path::PathBuf>> {
@@ -549,12 +449,12 @@ pub fn write_report(
          body{{font-family:DejaVu Sans,Arial,sans-serif;max-width:1150px;margin:1.5em auto;\
          padding:0 1em;color:#222;line-height:1.4}}\
          table{{border-collapse:collapse;margin:0.6em 0 1.2em;font-size:14px}}\
-         td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}}\
-         td:first-child,th:first-child{{text-align:left}}th{{background:#f0f0f0}}\
+         td,th{{border:1px solid #bbb;padding:3px 8px;text-align:left}}\
+         td.r,th.r{{text-align:right}}td.r{{white-space:nowrap}}th{{background:#f0f0f0}}\
          figure{{margin:1.5em 0;overflow-x:auto}}figcaption{{font-weight:bold;margin-bottom:0.3em}}\
          code{{background:#f4f4f4;padding:0 3px}}h2{{border-bottom:1px solid #ddd}}\
          </style></head><body>\n{}\n<h2>Charts</h2>\n{}</body></html>\n",
-        markdown_to_html(tables_md),
+        tables.to_html(),
         body
     );
     let p = out.join("report.html");
@@ -565,17 +465,6 @@ pub fn write_report(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-
-    #[test]
-    fn markdown_tables_become_html_tables() {
-        let h = markdown_to_html("# T\n\n| a | b |\n|---|---:|\n| x | **1** |\n\n- `c` & d\n");
-        assert!(h.contains("<h1>T</h1>"));
-        assert!(h.contains("<tr><th>a</th><th>b</th></tr>"));
-        assert!(h.contains("<tr><td>x</td><td><b>1</b></td></tr>"));
-        assert!(h.contains("<li><code>c</code> &amp; d</li>"));
-        let h = markdown_to_html("## Two\n### Three <x>\n");
-        assert_eq!(h, "<h2>Two</h2>\n<h3>Three &lt;x&gt;</h3>\n");
-    }
 
     #[test]
     fn heat_runs_from_light_to_dark() {
@@ -663,14 +552,13 @@ pub(crate) mod tests {
             assert!(!svg.contains("<script"), "{name}");
             assert!(!title.is_empty());
         }
-        let md = format!(
-            "# {}\n\n| a | b |\n|---|---|\n| {} | {} |\n\n- {}\n",
-            evil("h"),
-            evil("c1"),
-            evil("c2"),
-            evil("l")
-        );
-        let html = markdown_to_html(&md);
+        let mut doc = crate::doc::Doc::new();
+        doc.heading(1, evil("h"));
+        let mut t = crate::doc::Table::new(&[("a", false), ("b", true)]);
+        t.row(vec![evil("c1"), evil("c2")]);
+        doc.table(t);
+        doc.list(vec![evil("l")]);
+        let html = doc.to_html();
         assert_well_formed(&html);
         assert!(html.contains("&lt;script&gt;alert(&#39;c1&#39;)&lt;/script&gt;&quot;&amp;x"));
     }

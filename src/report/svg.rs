@@ -79,15 +79,8 @@ const MARGIN_R: f64 = 20.0;
 const MARGIN_T: f64 = 36.0;
 const MARGIN_B: f64 = 56.0;
 
-/// Escape text for an HTML or SVG text node or attribute (`&`, `<`, `>`, both quotes): the one
-/// escaping helper every report writer uses.
-pub fn escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-        .replace('\'', "&#39;")
-}
+// The one escaping helper every report writer uses (`&`, `<`, `>`, both quotes).
+pub use crate::doc::escape;
 
 /// "Nice" tick positions covering [lo, hi]: steps of 1, 2 or 5 times a power of ten.
 pub fn ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {

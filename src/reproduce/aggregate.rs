@@ -1,12 +1,7 @@
 //! Results of a plan: one [`Row`] per cell read back from its run folder (`metrics.json`,
-//! `config.json`, `cell.json`), written as `results.csv` / `results.json`, and `tables.md`:
-//! per dataset mean +- sd over seeds with n, the paper's numbers beside the matching rows, the
-//! verdicts, and the provenance of every row.
-//!
-//! Longer than 600 lines: every section of `tables.md` is written here from the same rows, one
-//! function per section, beside the row type they read.
+//! `config.json`, `cell.json`), as CSV, the pairing observations and the verdicts, the groups
+//! of rows a table shows, and how a method is named. [`super::tables`] writes them out.
 
-use std::fmt::Write as _;
 use std::path::Path;
 
 use serde::Serialize;
@@ -15,7 +10,6 @@ use super::plan::Plan;
 use super::provenance;
 use super::run::{cells, read_record, Cell, Status};
 use super::verdict::{self, Obs, Verdict};
-use crate::error::{Error, Result};
 
 /// One cell's result.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -176,7 +170,7 @@ fn csv_field(s: &str) -> String {
     }
 }
 
-fn o<T: ToString>(v: &Option<T>) -> String {
+pub(super) fn o<T: ToString>(v: &Option<T>) -> String {
     v.as_ref().map(|x| x.to_string()).unwrap_or_default()
 }
 
@@ -230,7 +224,7 @@ pub fn to_csv(rows: &[Row]) -> String {
 }
 
 /// ` @ axis = value` of a group's rows at a condition's value (empty at the base).
-fn condition_suffix(rs: &[&Row]) -> String {
+pub(super) fn condition_suffix(rs: &[&Row]) -> String {
     match rs.first().map(|r| (&r.condition, &r.condition_value)) {
         Some((Some(a), Some(v))) => format!(" @ {a} = {v}"),
         _ => String::new(),
@@ -264,41 +258,6 @@ pub fn verdicts(plan: &Plan, rows: &[Row]) -> Vec<Verdict> {
         .iter()
         .map(|c| verdict::evaluate(c, &obs))
         .collect()
-}
-
-/// `results.json`: the rows and the verdicts.
-pub fn to_json(plan: &Plan, rows: &[Row], verdicts: &[Verdict]) -> String {
-    let v = serde_json::json!({
-        "plan": plan.name,
-        "iters": plan.iters,
-        "compress_schedule": plan.compress_schedule,
-        "seeds": plan.seeds,
-        "rows": rows,
-        "verdicts": verdicts,
-        "magnitude": super::magnitude::scoped(plan, rows),
-    });
-    serde_json::to_string_pretty(&v).expect("serialisable")
-}
-
-fn pm(v: &[f64], prec: usize) -> String {
-    let (m, sd, n) = verdict::mean_sd(v);
-    match n {
-        0 => "-".into(),
-        1 => format!("{m:.prec$}"),
-        _ => format!("{m:.prec$} ± {sd:.prec$}"),
-    }
-}
-
-/// [`pm`] with the decimals that give the mean `digits` significant digits (at least 1
-/// decimal): fps runs from ~0.1 (NeRF) to ~100 (Gaussians).
-fn pm_sig(v: &[f64], digits: i32) -> String {
-    let (m, _, _) = verdict::mean_sd(v);
-    let mag = if m.is_finite() && m != 0.0 {
-        m.abs().log10().floor() as i32
-    } else {
-        0
-    };
-    pm(v, (digits - 1 - mag).clamp(1, 6) as usize)
 }
 
 /// How a method is named in tables and charts: the plan's name, with ` (reduced)` when it runs
@@ -356,305 +315,14 @@ pub fn groups(rows: &[Row]) -> Vec<(String, String, Option<String>, Vec<&Row>)> 
     g
 }
 
-fn vals(rs: &[&Row], f: impl Fn(&Row) -> Option<f64>) -> Vec<f64> {
-    rs.iter().filter_map(|r| f(r)).collect()
-}
-
-/// `tables.md`.
-pub fn tables_md(
-    plan: &Plan,
-    rows: &[Row],
-    verdicts: &[Verdict],
-    preset_help: &[(String, String)],
-    extra: &str,
-) -> String {
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "# `unispine reproduce {}`: {} iterations{}, seeds {:?}\n",
-        plan.name,
-        plan.iters,
-        if plan.compress_schedule {
-            " (the paper's 20000-iteration schedule compressed)"
-        } else {
-            ""
-        },
-        plan.seeds
-    );
-    let _ = writeln!(
-        s,
-        "Test views: PSNR (dB) and SSIM as mean ± sd over seeds (n = completed runs); train time \
-         = the training loop's wall time; fps = test views rendered per second. Paper: the \
-         paper's own number for the corresponding row, measured on another machine (RTX 3090) \
-         at another resolution (1024 x 1024 detector) with the full schedule: compare trends, \
-         not values.\n"
-    );
-    let sweep_col = plan.sweep.as_ref().map(|s| s.flag.clone());
-    for d in &plan.datasets {
-        let g: Vec<_> = groups(rows).into_iter().filter(|x| x.0 == d.name).collect();
-        if g.iter().all(|x| x.3.iter().all(|r| r.status == "missing")) {
-            let _ = writeln!(s, "## {}: no results\n", d.name);
-            continue;
-        }
-        let _ = writeln!(
-            s,
-            "## {}{}\n",
-            d.name,
-            d.paper
-                .as_ref()
-                .map(|p| format!(" (stands in for {p})"))
-                .unwrap_or_default()
-        );
-        let _ = writeln!(
-            s,
-            "| method |{} n | PSNR (dB) | SSIM | train time (s) | fps | Gaussians | paper PSNR / SSIM / time (s) |",
-            sweep_col.as_ref().map(|f| format!(" {f} |")).unwrap_or_default()
-        );
-        let _ = writeln!(
-            s,
-            "|---|{}---:|---:|---:|---:|---:|---:|---|",
-            if sweep_col.is_some() { "---:|" } else { "" }
-        );
-        for (_, method, sv, rs) in &g {
-            let n = rs.iter().filter(|r| r.psnr.is_some()).count();
-            let base = rs.first().map(|r| r.base.as_str()).unwrap_or("");
-            let paper = d
-                .paper
-                .as_ref()
-                .and_then(|p| verdict::paper_row(p, base))
-                .map(|p| format!("{:.2} / {:.4} / {:.0}", p.psnr, p.ssim, p.train_time_s))
-                .unwrap_or_default();
-            let gaussians = if crate::method::Baseline::parse(base).is_some() {
-                "-".to_string()
-            } else {
-                pm(&vals(rs, |r| r.n_gaussians.map(|x| x as f64)), 0)
-            };
-            let _ = writeln!(
-                s,
-                "| {}{} |{} {n} of {} | {} | {} | {} | {} | {gaussians} | {paper} |",
-                method_label(method, base),
-                condition_suffix(rs),
-                sv.as_ref().map(|v| format!(" {v} |")).unwrap_or_default(),
-                rs.len(),
-                pm(&vals(rs, |r| r.psnr), 2),
-                pm(&vals(rs, |r| r.ssim), 4),
-                pm(&vals(rs, |r| r.train_time_s), 1),
-                pm_sig(&vals(rs, |r| r.fps), 3),
-            );
-        }
-        s.push('\n');
-    }
-    // What each row runs.
-    let _ = writeln!(s, "## What each method row runs\n");
-    for m in &plan.methods {
-        let _ = writeln!(
-            s,
-            "- **{}**: {}",
-            m.name,
-            describe(plan, &m.name, preset_help)
-        );
-    }
-    s.push_str(&super::holds::describe_conditions(plan));
-    let base_of = |m: &crate::reproduce::plan::MethodSpec| crate::method::Baseline::parse(&m.base);
-    if plan.methods.iter().any(|m| base_of(m).is_none()) {
-        let _ = writeln!(
-            s,
-            "\n{}: `unispine train --iters {}{}{}`.",
-            if plan.methods.iter().any(|m| base_of(m).is_some()) {
-                "Every Gaussian cell"
-            } else {
-                "Every cell"
-            },
-            plan.iters,
-            if plan.compress_schedule {
-                " --compress-schedule"
-            } else {
-                ""
-            },
-            if plan.train_args.is_empty() {
-                String::new()
-            } else {
-                format!(" {}", plan.train_args.join(" "))
-            }
-        );
-    }
-    if plan
-        .methods
-        .iter()
-        .any(|m| matches!(base_of(m), Some(crate::method::Baseline::Field(_))))
-    {
-        let fdk = plan
-            .methods
-            .iter()
-            .any(|m| base_of(m) == Some(crate::method::Baseline::Fdk));
-        let _ = writeln!(
-            s,
-            "\nEvery neural-field cell: {}{}.",
-            match plan.field_iters {
-                Some(n) => format!("`unispine train --iters {n}`"),
-                None => "the preset's own schedule".into(),
-            },
-            if fdk { "; FDK is one pass" } else { "" }
-        );
-    }
-    s.push('\n');
-    // Verdicts.
-    let _ = writeln!(s, "## Verdicts on the paper's claims\n");
-    let _ = writeln!(
-        s,
-        "| claim | A vs B | pairs | mean difference | 95 % interval | verdict |\n|---|---|---:|---:|---|---|"
-    );
-    for v in verdicts {
-        let (unit, conv): (&str, fn(f64) -> f64) = match v.claim.measure {
-            verdict::Measure::PsnrGain => (" dB", |x| x),
-            _ => ("x", f64::exp),
-        };
-        let fmt = |x: f64| {
-            if x.is_finite() {
-                format!("{:.3}{unit}", conv(x))
-            } else {
-                "-".into()
-            }
-        };
-        let _ = writeln!(
-            s,
-            "| {} | {} vs {} | {} | {} | {} | **{}** |",
-            v.claim.text,
-            v.claim.a,
-            v.claim.b,
-            v.n,
-            fmt(v.mean),
-            if v.n >= 2 {
-                format!("[{}, {}]", fmt(v.lo), fmt(v.hi))
-            } else {
-                "-".into()
-            },
-            v.word.as_str()
-        );
-    }
-    let _ = writeln!(
-        s,
-        "\nPairs: cells of A and B that completed on the same dataset and seed{}; a claim the \
-         paper makes for one dataset pairs only the plan datasets standing in for it. Accuracy: d = \
-         PSNR(A) - PSNR(B); speed: d = ln(speed ratio), shown as the ratio, tested against the \
-         paper's factor. Interval: paired t, mean(d) ± t(0.975, n-1) · sd(d) / sqrt(n). \
-         Reproduced: the interval lies wholly above the paper's threshold (0 dB, or ln of the \
-         factor); not reproduced: wholly below; otherwise inconclusive (also with fewer than 2 \
-         pairs). Not tested: a method of the claim is not in this plan or has no completed \
-         pair.\n",
-        if plan.sweep.is_some() {
-            " (and sweep value)"
-        } else {
-            ""
-        }
-    );
-    s.push_str(&super::magnitude::section(plan, rows));
-    s.push_str(&super::holds::section(plan, rows));
-    // Cells that did not complete.
-    let bad: Vec<&Row> = rows.iter().filter(|r| r.psnr.is_none()).collect();
-    if !bad.is_empty() {
-        let _ = writeln!(
-            s,
-            "## Cells without a result ({} of {})\n",
-            bad.len(),
-            rows.len()
-        );
-        for r in bad {
-            let _ = writeln!(
-                s,
-                "- `{}`: {}{}",
-                r.run_dir,
-                r.status,
-                r.error
-                    .as_ref()
-                    .map(|e| format!(": {}", e.replace('\n', " ")))
-                    .unwrap_or_default()
-            );
-        }
-        s.push('\n');
-    }
-    // Provenance.
-    let _ = writeln!(s, "## Provenance\n");
-    let mut seen: Vec<String> = Vec::new();
-    for r in rows.iter().filter(|r| r.version.is_some()) {
-        let line = format!(
-            "unispine {} (commit {}), CPU {} ({} cores, SIMD {}), {} threads per run",
-            o(&r.version),
-            o(&r.git_commit),
-            o(&r.cpu_model),
-            o(&r.cores),
-            o(&r.simd),
-            o(&r.threads)
-        );
-        if !seen.contains(&line) {
-            seen.push(line);
-        }
-    }
-    for l in &seen {
-        let _ = writeln!(s, "- {l}");
-    }
-    let mut ds_seen: Vec<String> = Vec::new();
-    for r in rows {
-        if let Some(c) = &r.dataset_checksum {
-            let l = format!("dataset `{}`: checksum {c}", r.dataset);
-            if !ds_seen.contains(&l) {
-                ds_seen.push(l);
-            }
-        }
-    }
-    for l in &ds_seen {
-        let _ = writeln!(s, "- {l}");
-    }
-    let _ = writeln!(
-        s,
-        "- per row (results.csv): version, git commit, dataset checksum, config hash, CPU, \
-         cores, SIMD path, threads"
-    );
-    s.push_str(&super::compactness::section(rows));
-    if !extra.is_empty() {
-        s.push('\n');
-        s.push_str(extra);
-    }
-    s
-}
-
 /// Which cells have no result (for `--collect` over partial results).
 pub fn missing(rows: &[Row]) -> Vec<&Row> {
     rows.iter().filter(|r| r.psnr.is_none()).collect()
 }
 
-/// Write `results.csv`, `results.json` and `tables.md` into `out`; returns the verdicts.
-pub fn write_all(
-    plan: &Plan,
-    out: &Path,
-    preset_help: &[(String, String)],
-    extra: &str,
-) -> Result<(Vec<Row>, Vec<Verdict>, String)> {
-    let rows = gather(plan, out);
-    let v = verdicts(plan, &rows);
-    let w = |name: &str, text: &str| -> Result<()> {
-        let p = out.join(name);
-        std::fs::write(&p, text).map_err(|e| Error::io(&p, e))
-    };
-    w("results.csv", &to_csv(&rows))?;
-    w("results.json", &to_json(plan, &rows, &v))?;
-    let md = tables_md(plan, &rows, &v, preset_help, extra);
-    w("tables.md", &md)?;
-    Ok((rows, v, md))
-}
-
 #[cfg(test)]
 mod tests {
-    use super::{method_label, pm_sig};
-
-    #[test]
-    fn fps_keep_three_significant_digits() {
-        assert_eq!(pm_sig(&[110.14, 110.16], 3), "110.2 ± 0.0");
-        assert_eq!(pm_sig(&[1.93], 3), "1.93");
-        assert_eq!(pm_sig(&[0.0817, 0.0817], 3), "0.0817 ± 0.0000");
-        assert_eq!(pm_sig(&[0.0], 3), "0.00");
-        assert_eq!(pm_sig(&[], 3), "-");
-    }
+    use super::method_label;
 
     #[test]
     fn reduced_field_presets_are_labelled_as_reduced() {

@@ -5,11 +5,13 @@
 
 use std::path::{Path, PathBuf};
 
-use super::aggregate::{self, Row};
+use super::aggregate::Row;
 use super::claims_doc::{self, Header};
 use super::plan::Plan;
 use super::run::{self, RunEvent, RunOptions, RunSummary};
+use super::tables;
 use super::verdict::Verdict;
+use crate::doc::Doc;
 use crate::error::{Error, Result};
 
 /// The folder a plan's relative paths start from: the plan file's folder, or the current
@@ -113,8 +115,8 @@ pub fn harness_line(sum: &RunSummary, jobs: usize) -> String {
 pub struct Tables {
     pub rows: Vec<Row>,
     pub verdicts: Vec<Verdict>,
-    /// The text of `tables.md`.
-    pub markdown: String,
+    /// `tables.md` as a document (`report.html` renders it again).
+    pub doc: Doc,
 }
 
 /// `results.csv`, `results.json` and `tables.md` from the cells in `out` (`extra`: a line for
@@ -126,15 +128,15 @@ pub fn write_tables(
     extra: &str,
     claims_doc: Option<(&Path, &Header)>,
 ) -> Result<Tables> {
-    let (rows, verdicts, markdown) = aggregate::write_all(plan, out, preset_help, extra)?;
+    let (rows, verdicts, doc) = tables::write_all(plan, out, preset_help, extra)?;
     if let Some((doc, header)) = claims_doc {
-        let text = claims_doc::render(plan, &rows, header);
+        let text = claims_doc::render(plan, &rows, header).to_markdown();
         crate::fsio::write_atomic(doc, text.as_bytes())?;
     }
     Ok(Tables {
         rows,
         verdicts,
-        markdown,
+        doc,
     })
 }
 

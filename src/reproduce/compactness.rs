@@ -8,7 +8,7 @@
 //! over the seeds is >= -0.1 dB (every seed is also shown through the worst d_s). The smallest
 //! such rung by mean Gaussian count is reported with its mean count and mean render fps.
 
-use std::fmt::Write as _;
+use crate::doc::{Doc, Table};
 
 use super::aggregate::{groups, Row};
 
@@ -93,78 +93,84 @@ pub fn unbounded(rows: &[Row]) -> Vec<(String, String, f64, f64)> {
     out
 }
 
-/// The markdown section (empty when no cell compacted).
-pub fn section(rows: &[Row]) -> String {
+/// The `tables.md` section (empty when no cell compacted).
+pub fn section(rows: &[Row]) -> Doc {
+    let mut d = Doc::new();
     if rows.iter().all(|r| r.unbounded_psnr.is_none()) {
-        return String::new();
+        return d;
     }
-    let mut s = String::new();
     let flag = rows
         .iter()
         .find_map(|r| r.sweep_flag.clone())
         .unwrap_or_else(|| "compaction".into());
-    let _ = writeln!(
-        s,
-        "\n## Compactness: the smallest model within {WITHIN_DB} dB of the unbounded one\n\n\
-         Unbounded = the model each compacting run pruned (densification without a budget; the \
+    d.heading(
+        2,
+        format!("Compactness: the smallest model within {WITHIN_DB} dB of the unbounded one"),
+    );
+    d.para(format!(
+        "Unbounded = the model each compacting run pruned (densification without a budget; the \
          same bits as a plain run of that seed). Compacted = pruned by the alpha*T importance \
          over the training views, then fine-tuned. A rung is within {WITHIN_DB} dB when the \
          mean over seeds of the paired drop PSNR(compacted) - PSNR(unbounded) is >= \
          -{WITHIN_DB} dB; counts, PSNR and fps are means over seeds; fps is of the compacted \
-         (saved) model.\n"
-    );
+         (saved) model."
+    ));
     let mut seen: Vec<(String, String)> = Vec::new();
-    for (d, m, _, _) in groups(rows) {
-        if seen.contains(&(d.clone(), m.clone())) {
+    for (ds, m, _, _) in groups(rows) {
+        if seen.contains(&(ds.clone(), m.clone())) {
             continue;
         }
-        seen.push((d.clone(), m.clone()));
-        let (rungs, unb) = ladder(rows, &d, &m);
+        seen.push((ds.clone(), m.clone()));
+        let (rungs, unb) = ladder(rows, &ds, &m);
         let Some((un, up)) = unb else { continue };
-        let _ = writeln!(
-            s,
-            "**{d} / {m}**\n\n| {flag} | Gaussians | test PSNR (dB) | drop, mean (worst) | fps | \
-             seeds | within {WITHIN_DB} dB |\n|---|---:|---:|---:|---:|---:|---|"
-        );
-        let _ = writeln!(s, "| unbounded | {un:.0} | {up:.3} | | | | |");
+        d.para(format!("**{ds} / {m}**"));
+        let within = format!("within {WITHIN_DB} dB");
+        let mut t = Table::new(&[
+            (flag.as_str(), true),
+            ("Gaussians", true),
+            ("test PSNR (dB)", true),
+            ("drop, mean (worst)", true),
+            ("fps", true),
+            ("seeds", true),
+            (within.as_str(), false),
+        ]);
+        let mut cells = vec![
+            "unbounded".to_string(),
+            format!("{un:.0}"),
+            format!("{up:.3}"),
+        ];
+        cells.resize(7, String::new());
+        t.row(cells);
         for r in &rungs {
-            let _ = writeln!(
-                s,
-                "| {} | {:.0} | {:.3} | {:+.3} ({:+.3}) | {:.1} | {} | {} |",
+            t.row(vec![
+                r.0.clone(),
+                format!("{:.0}", r.1),
+                format!("{:.3}", r.2),
+                format!("{:+.3} ({:+.3})", r.4, r.5),
+                format!("{:.1}", r.3),
+                r.6.to_string(),
+                if r.4 >= -WITHIN_DB { "yes" } else { "no" }.to_string(),
+            ]);
+        }
+        d.table(t);
+        d.para(match rungs.iter().find(|r| r.4 >= -WITHIN_DB) {
+            Some(r) => format!(
+                "**Smallest within {WITHIN_DB} dB: {flag} {}: {:.0} Gaussians ({:.0} % of the \
+                 unbounded {un:.0}), {:.3} dB (mean drop {:+.3} dB), {:.1} fps.**",
                 r.0,
                 r.1,
+                100.0 * r.1 / un.max(1.0),
                 r.2,
                 r.4,
-                r.5,
-                r.3,
-                r.6,
-                if r.4 >= -WITHIN_DB { "yes" } else { "no" }
-            );
-        }
-        match rungs.iter().find(|r| r.4 >= -WITHIN_DB) {
-            Some(r) => {
-                let _ = writeln!(
-                    s,
-                    "\n**Smallest within {WITHIN_DB} dB: {flag} {}: {:.0} Gaussians ({:.0} % of \
-                     the unbounded {un:.0}), {:.3} dB (mean drop {:+.3} dB), {:.1} fps.**\n",
-                    r.0,
-                    r.1,
-                    100.0 * r.1 / un.max(1.0),
-                    r.2,
-                    r.4,
-                    r.3
-                );
-            }
-            None => {
-                let _ = writeln!(
-                    s,
-                    "\n**No rung is within {WITHIN_DB} dB: the unbounded model ({un:.0} \
-                     Gaussians) is the smallest.**\n"
-                );
-            }
-        }
+                r.3
+            ),
+            None => format!(
+                "**No rung is within {WITHIN_DB} dB: the unbounded model ({un:.0} Gaussians) is \
+                 the smallest.**"
+            ),
+        });
     }
-    s
+    d
 }
 
 #[cfg(test)]
@@ -207,7 +213,7 @@ mod tests {
             row("0.6", 0, 600, 30.10, u0),
             row("0.6", 1, 720, 31.00, u1),
         ];
-        let s = section(&rows);
+        let s = section(&rows).to_markdown();
         assert!(s.contains("| unbounded | 1100 | 30.500 |"), "{s}");
         assert!(
             s.contains("Smallest within 0.1 dB: compact-keep 0.3: 330 Gaussians (30 % of the unbounded 1100)"),
@@ -229,6 +235,6 @@ mod tests {
                 ..r.clone()
             })
             .collect();
-        assert_eq!(section(&plain), "");
+        assert!(section(&plain).is_empty());
     }
 }

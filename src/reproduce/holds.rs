@@ -8,15 +8,14 @@
 //! 3DGS" at `init = unit-cube` acting on `3dgs` pairs X-Gaussian's base cells with 3DGS's
 //! unit-cube cells). A condition acting on neither method of a claim is left out of that claim.
 
-use std::fmt::Write as _;
-
 use serde::Serialize;
 
 use super::aggregate::Row;
-use super::magnitude::{scopes, Scoped};
+use super::magnitude::{db, scopes, Scoped};
 use super::plan::conditions::Condition;
 use super::plan::Plan;
 use super::verdict::{claims_for, Claim, Measure};
+use crate::doc::{Doc, Table};
 #[cfg(test)]
 use std::path::Path;
 
@@ -90,98 +89,89 @@ pub fn holds(plan: &Plan, rows: &[Row]) -> Vec<Holds> {
     out
 }
 
-fn db(x: f64) -> String {
-    if x.is_finite() {
-        format!("{x:+.3} dB")
-    } else {
-        "-".into()
-    }
-}
-
-/// A markdown table cell: `|` and line breaks would break the table.
-fn cell(s: &str) -> String {
-    s.replace('|', "\\|").replace(['\n', '\r'], " ")
-}
-
-/// The `tables.md` section "Where each claim holds" (empty without conditions).
-pub fn section(plan: &Plan, rows: &[Row]) -> String {
+/// The `tables.md` section "Where each claim holds" under `title` (empty without conditions).
+pub fn section(plan: &Plan, rows: &[Row], title: &str) -> Doc {
+    let mut d = Doc::new();
     let h = holds(plan, rows);
     if h.is_empty() {
-        return String::new();
+        return d;
     }
-    let mut s = String::from("## Where each claim holds\n\n");
-    s.push_str(
+    d.heading(2, title);
+    d.para(
         "Each accuracy claim at each value of each condition (every other condition at its \
          base). At a condition's value the methods it acts on use their cells at that value, \
          the others their base cells. Effect: PSNR(A) - PSNR(B) in dB, mean over the pairs \
          (dataset, seed) with the paired 95 % t interval; sign: the interval against 0; \
          magnitude: the paper's effect against the interval (inside / above: ours is smaller / \
-         below: ours is larger). Chart: `charts/holds-N.svg` in the report.\n\n",
+         below: ours is larger). Chart: `charts/holds-N.svg` in the report.",
     );
-    let mut last_claim = String::new();
-    for x in &h {
-        if x.claim.text != last_claim {
-            if !last_claim.is_empty() {
-                s.push('\n');
+    let mut i = 0;
+    while i < h.len() {
+        let claim = &h[i].claim;
+        d.heading(
+            3,
+            format!("{} (A = {}, B = {})", claim.text, claim.a, claim.b),
+        );
+        let mut t = Table::new(&[
+            ("condition", false),
+            ("value", false),
+            ("scope", false),
+            ("pairs", true),
+            ("effect", true),
+            ("95 % interval", false),
+            ("paper", true),
+            ("sign", false),
+            ("magnitude", false),
+        ]);
+        while i < h.len() && h[i].claim.text == claim.text {
+            let x = &h[i];
+            for sc in &x.scopes {
+                let v = &sc.verdict;
+                t.row(vec![
+                    x.axis.clone(),
+                    format!("{}{}", x.value, if x.is_base { " (base)" } else { "" }),
+                    sc.scope.clone(),
+                    v.n.to_string(),
+                    db(v.mean),
+                    sc.interval_cell(db),
+                    sc.paper_cell(),
+                    v.word.as_str().to_string(),
+                    sc.place.as_str().to_string(),
+                ]);
             }
-            last_claim = x.claim.text.clone();
-            let _ = writeln!(
-                s,
-                "### {} (A = {}, B = {})\n",
-                cell(&x.claim.text),
-                cell(&x.claim.a),
-                cell(&x.claim.b)
-            );
-            s.push_str(
-                "| condition | value | scope | pairs | effect | 95 % interval | paper | sign | \
-                 magnitude |\n|---|---|---|---:|---:|---|---:|---|---|\n",
-            );
+            i += 1;
         }
-        for sc in &x.scopes {
-            let v = &sc.verdict;
-            let _ = writeln!(
-                s,
-                "| {} | {}{} | {} | {} | {} | {} | {} | {} | {} |",
-                cell(&x.axis),
-                cell(&x.value),
-                if x.is_base { " (base)" } else { "" },
-                cell(&sc.scope),
-                v.n,
-                db(v.mean),
-                sc.interval_cell(db),
-                sc.paper_cell(),
-                v.word.as_str(),
-                sc.place.as_str()
-            );
-        }
+        d.table(t);
     }
-    s.push('\n');
-    s
+    d
 }
 
 /// The conditions of a plan in words, for `tables.md` ("What each method row runs").
-pub fn describe_conditions(plan: &Plan) -> String {
+pub fn describe_conditions(plan: &Plan) -> Doc {
+    let mut d = Doc::new();
     if plan.conditions.is_empty() {
-        return String::new();
+        return d;
     }
-    let mut s = String::from(
-        "\nConditions, varied one at a time (every other condition at its base value):\n\n",
+    d.para("Conditions, varied one at a time (every other condition at its base value):");
+    d.list(
+        plan.conditions
+            .iter()
+            .map(|c| {
+                let what = match c.on {
+                    super::plan::conditions::Target::Method => "the method replaced by".to_string(),
+                    t => format!("`unispine {} --{}`", t.as_str(), c.flag),
+                };
+                format!(
+                    "**{}**: {what} {} (base: {}), for {}",
+                    c.axis,
+                    c.values.join(", "),
+                    c.base_label(),
+                    c.methods.join(", ")
+                )
+            })
+            .collect(),
     );
-    for c in &plan.conditions {
-        let what = match c.on {
-            super::plan::conditions::Target::Method => "the method replaced by".to_string(),
-            t => format!("`unispine {} --{}`", t.as_str(), c.flag),
-        };
-        let _ = writeln!(
-            s,
-            "- **{}**: {what} {} (base: {}), for {}",
-            c.axis,
-            c.values.join(", "),
-            c.base_label(),
-            c.methods.join(", ")
-        );
-    }
-    s
+    d
 }
 
 #[cfg(test)]
@@ -313,7 +303,7 @@ pub(crate) mod tests {
     #[test]
     fn the_section_lists_every_value_with_its_verdicts() {
         let p = plan();
-        let s = section(&p, &rows());
+        let s = section(&p, &rows(), "Where each claim holds").to_markdown();
         assert!(s.starts_with("## Where each claim holds"));
         assert!(s.contains(
             "| pose-noise | 0.1 | pooled | 3 | +1.000 dB | [+0.503 dB, +1.497 dB] | +8.21 dB | \
@@ -325,7 +315,7 @@ pub(crate) mod tests {
         // No conditions: no section.
         let mut q = p.clone();
         q.conditions.clear();
-        assert_eq!(section(&q, &rows()), "");
+        assert!(section(&q, &rows(), "x").is_empty());
     }
 
     #[test]

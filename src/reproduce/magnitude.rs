@@ -14,13 +14,12 @@
 //! the mean our pooled interval estimates if every dataset reproduced the paper's effect. It is
 //! undefined (no magnitude line) when a dataset with pairs stands in for no paper dataset.
 
-use std::fmt::Write as _;
-
 use serde::Serialize;
 
 use super::aggregate::{self, Row};
 use super::plan::Plan;
 use super::verdict::{claims_for, evaluate, Claim, Measure, Verdict, Word, PAPER};
+use crate::doc::{Doc, Table};
 
 /// Where the paper's effect lies against our interval.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -204,49 +203,58 @@ pub(super) fn scopes(plan: &Plan, claim: &Claim, rows: &[Row]) -> Vec<Scoped> {
 
 /// The `tables.md` section: each accuracy claim, pooled and per dataset, its interval, the
 /// paper's effect and the reading on sign and magnitude.
-pub fn section(plan: &Plan, rows: &[Row]) -> String {
+pub fn section(plan: &Plan, rows: &[Row]) -> Doc {
+    let mut d = Doc::new();
     let sc = scoped(plan, rows);
     if sc.is_empty() {
-        return String::new();
+        return d;
     }
-    let mut s = String::from(
-        "## Verdicts on magnitude, per dataset and pooled
-
-",
-    );
-    s.push_str(
-        "| claim | scope | pairs | mean difference | 95 % interval | paper effect | reading |\n\
-         |---|---|---:|---:|---|---:|---|\n",
-    );
-    let f = |x: f64| {
-        if x.is_finite() {
-            format!("{x:+.3} dB")
-        } else {
-            "-".into()
-        }
-    };
-    for x in &sc {
-        let v = &x.verdict;
-        let _ = writeln!(
-            s,
-            "| {} | {} | {} | {} | {} | {} | {} |",
-            v.claim.text,
-            x.scope,
-            v.n,
-            f(v.mean),
-            x.interval_cell(f),
-            x.paper_cell(),
-            x.reading()
-        );
-    }
-    s.push_str(
-        "\nPaper effect: PSNR(A) - PSNR(B) of the paper's own rows for the paper dataset the \
+    d.heading(2, "Verdicts on magnitude, per dataset and pooled");
+    d.table(table(&sc, |x| x.verdict.claim.text.clone()));
+    d.para(
+        "Paper effect: PSNR(A) - PSNR(B) of the paper's own rows for the paper dataset the \
          plan dataset stands in for (Table 1 claims use Table 1's UniSpine-GS row); pooled: the \
          per-dataset paper effects weighted by each dataset's pairs. Magnitude reproduced: the \
          paper's effect lies inside our 95 % interval; above: our effect is smaller than the \
-         paper's; below: ours is larger.\n\n",
+         paper's; below: ours is larger.",
     );
-    s
+    d
+}
+
+/// An effect in dB with its sign, `-` when not finite.
+pub fn db(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:+.3} dB")
+    } else {
+        "-".into()
+    }
+}
+
+/// The table of scoped verdicts: claim (as `claim` writes it), scope, pairs, effect, interval,
+/// the paper's effect and the reading.
+pub fn table(sc: &[Scoped], claim: impl Fn(&Scoped) -> String) -> Table {
+    let mut t = Table::new(&[
+        ("claim", false),
+        ("scope", false),
+        ("pairs", true),
+        ("mean difference", true),
+        ("95 % interval", false),
+        ("paper effect", true),
+        ("reading", false),
+    ]);
+    for x in sc {
+        let v = &x.verdict;
+        t.row(vec![
+            claim(x),
+            x.scope.clone(),
+            v.n.to_string(),
+            db(v.mean),
+            x.interval_cell(db),
+            x.paper_cell(),
+            x.reading(),
+        ]);
+    }
+    t
 }
 
 #[cfg(test)]

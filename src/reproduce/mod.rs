@@ -7,7 +7,7 @@
 //! [`aggregate`] (results.csv / results.json, mean +- sd per row) -> [`verdict`] (the paper's
 //! claims as paired differences with 95 % intervals) -> [`magnitude`] (the paper's effect
 //! against those intervals, per dataset and pooled) -> [`holds`] (each claim at each value of
-//! the plan's conditions) -> `tables.md`.
+//! the plan's conditions) -> [`tables`] (`results.csv`, `results.json`, `tables.md`).
 //!
 //! [`plan`]: crate::reproduce::plan
 //! [`cell`]: crate::reproduce::cell
@@ -16,6 +16,7 @@
 //! [`verdict`]: crate::reproduce::verdict
 //! [`magnitude`]: crate::reproduce::magnitude
 //! [`holds`]: crate::reproduce::holds
+//! [`tables`]: crate::reproduce::tables
 
 pub mod aggregate;
 pub mod cell;
@@ -28,4 +29,5 @@ pub mod plan;
 pub mod provenance;
 pub mod run;
 pub mod slurm;
+pub mod tables;
 pub mod verdict;
