@@ -507,4 +507,34 @@ mod tests {
         assert!((t975(60) - 2.000).abs() < 0.002);
         assert!((t975(120) - 1.980).abs() < 0.002);
     }
+
+    #[test]
+    fn an_interval_must_lie_wholly_on_one_side_and_be_finite() {
+        // Touching the threshold is not "wholly above / below".
+        assert_eq!(decide(0.0, 1.0, 3, 0.0), Word::Inconclusive);
+        assert_eq!(decide(-1.0, 0.0, 3, 0.0), Word::Inconclusive);
+        assert_eq!(decide(1e-9, 1.0, 3, 0.0), Word::Reproduced);
+        assert_eq!(decide(-1.0, -1e-9, 3, 0.0), Word::NotReproduced);
+        // One pair: inconclusive even with a finite interval above.
+        assert_eq!(decide(0.5, 1.0, 1, 0.0), Word::Inconclusive);
+        // Either end not finite: inconclusive, whatever the other end says.
+        assert_eq!(decide(1.0, f64::INFINITY, 5, 0.0), Word::Inconclusive);
+        assert_eq!(decide(f64::NEG_INFINITY, -1.0, 5, 0.0), Word::Inconclusive);
+        assert_eq!(decide(1.0, 2.0, 0, 0.0), Word::NotTested);
+    }
+
+    #[test]
+    fn a_baseline_claim_exists_only_for_the_baselines_in_the_plan() {
+        let names = |ms: &[&str]| -> Vec<String> {
+            let v: Vec<String> = ms.iter().map(|m| m.to_string()).collect();
+            claims_for(&v)
+                .into_iter()
+                .filter(|c| c.text.contains("(Table 1: beats every baseline)"))
+                .map(|c| c.b)
+                .collect()
+        };
+        assert!(names(&["unispine", "xgaussian"]).is_empty());
+        assert_eq!(names(&["unispine", "naf", "xgaussian"]), ["naf"]);
+        assert_eq!(names(&["fdk", "unispine", "tensorf"]), ["fdk", "tensorf"]);
+    }
 }
