@@ -1,5 +1,5 @@
 //! Import of NAF-layout dataset pickles: every value of fixtures written by numpy 1.x and 2.x
-//! in protocols 2, 4 and 5 (tools/make_pickle_fixtures.py), and the errors on bad pickles.
+//! in protocols 2, 4 and 5 (tests/fixtures/make_pickle_fixtures.py), and the errors on bad pickles.
 
 use std::path::{Path, PathBuf};
 
