@@ -327,9 +327,20 @@ fn provenance(d: &mut Doc, rows: &[Row]) {
             o(&r.threads)
         ));
     }
+    // A data condition builds its own dataset per value: name it beside the checksum (a base
+    // row sharing the checksum makes it the base dataset).
     for r in rows {
         if let Some(c) = &r.dataset_checksum {
-            push(format!("dataset `{}`: checksum {c}", r.dataset));
+            let same = |x: &&Row| x.dataset == r.dataset && x.dataset_checksum.as_ref() == Some(c);
+            let at = if rows.iter().filter(same).any(|x| x.condition.is_none()) {
+                String::new()
+            } else {
+                match (&r.condition, &r.condition_value) {
+                    (Some(a), Some(v)) => format!(" at {a} = {v}"),
+                    _ => String::new(),
+                }
+            };
+            push(format!("dataset `{}`{at}: checksum {c}", r.dataset));
         }
     }
     items.push(
@@ -376,7 +387,39 @@ pub fn write_all(
 
 #[cfg(test)]
 mod tests {
-    use super::pm_sig;
+    use super::{pm_sig, provenance, Row};
+    use crate::doc::{Block, Doc};
+
+    #[test]
+    fn a_data_condition_s_dataset_is_named_beside_its_checksum() {
+        let row = |cond: Option<(&str, &str)>, sum: &str| Row {
+            dataset: "d".into(),
+            condition: cond.map(|c| c.0.into()),
+            condition_value: cond.map(|c| c.1.into()),
+            dataset_checksum: Some(sum.into()),
+            ..Default::default()
+        };
+        let rows = [
+            row(None, "aaaa"),
+            row(Some(("pose-noise", "0.1")), "bbbb"),
+            // A train condition runs on the base dataset.
+            row(Some(("init", "acui")), "aaaa"),
+            row(None, "aaaa"),
+        ];
+        let mut d = Doc::new();
+        provenance(&mut d, &rows);
+        let Some(Block::List(items)) = d.blocks.get(1) else {
+            panic!("{d:?}")
+        };
+        assert_eq!(
+            items[..2],
+            [
+                "dataset `d`: checksum aaaa".to_string(),
+                "dataset `d` at pose-noise = 0.1: checksum bbbb".to_string()
+            ]
+        );
+        assert_eq!(items.len(), 3, "{items:?}");
+    }
 
     #[test]
     fn fps_keep_three_significant_digits() {
