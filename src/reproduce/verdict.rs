@@ -494,6 +494,19 @@ mod tests {
         assert_eq!(v.n, 2, "{:?}", v.diffs);
         assert!((v.diffs[0] - 10f64.ln()).abs() < 1e-12 && (v.diffs[1] - 8f64.ln()).abs() < 1e-12);
         assert!((v.threshold - 6.2f64.ln()).abs() < 1e-12);
+        // Render speed: ln(fps(A) / fps(B)), 100 / 0.1 = 1000 on both CT pairs.
+        let render = claims
+            .iter()
+            .find(|c| matches!(c.measure, Measure::RenderSpeedup(_)))
+            .unwrap();
+        let v = evaluate(render, &obs);
+        assert_eq!(v.n, 2, "{:?}", v.diffs);
+        assert!(
+            v.diffs.iter().all(|d| (d - 1000f64.ln()).abs() < 1e-9),
+            "{:?}",
+            v.diffs
+        );
+        assert!((v.threshold - 300f64.ln()).abs() < 1e-12);
         let v = evaluate(&claims[0], &obs); // xgaussian vs 3dgs: no such rows
         assert_eq!(v.word, Word::NotTested);
     }
