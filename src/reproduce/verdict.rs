@@ -550,4 +550,56 @@ mod tests {
         assert_eq!(names(&["unispine", "naf", "xgaussian"]), ["naf"]);
         assert_eq!(names(&["fdk", "unispine", "tensorf"]), ["fdk", "tensorf"]);
     }
+
+    /// Table 1 prints train times in whole minutes, and the paper's text derives ratios from
+    /// them (Sec. 4.2: "15 min, which is 6.2x faster than NAF (93 min)"; on FeSpine3D "7 min,
+    /// about 4.1x faster than IntraTomo (29 min) and 66.6x faster than NeRF (466 min)", "646x
+    /// speedup over NAF (0.23 fps)", "over 300x ... NAF (0.37 fps)").
+    #[test]
+    fn table_1_rows_agree_with_the_ratios_the_paper_s_text_states() {
+        let t1: Vec<&PaperRow> = PAPER.iter().filter(|r| r.table == 1).collect();
+        assert_eq!(t1.len(), 10);
+        for r in &t1 {
+            let min = r.train_time_s / 60.0;
+            assert!(
+                min.fract() == 0.0 && (1.0..=1000.0).contains(&min),
+                "{} {}: {} s is not whole minutes",
+                r.dataset,
+                r.method,
+                r.train_time_s
+            );
+        }
+        let row = |d: &str, m: &str| {
+            *t1.iter()
+                .find(|r| r.dataset == d && r.method == m)
+                .unwrap_or_else(|| panic!("no Table 1 row {d} {m}"))
+        };
+        let ours_ct = row("CTSpine3D", "unispine-t1");
+        assert_eq!(ours_ct.train_time_s, 15.0 * 60.0);
+        let ratio = |a: f64, b: f64, stated: f64, digits: i32| {
+            let k = 10f64.powi(digits);
+            assert_eq!((a / b * k).round() / k, stated, "{a} / {b}");
+        };
+        ratio(
+            row("CTSpine3D", "naf").train_time_s,
+            ours_ct.train_time_s,
+            6.2,
+            1,
+        );
+        assert!(ours_ct.fps.unwrap() / row("CTSpine3D", "naf").fps.unwrap() > 300.0);
+        let ours_fe = row("FeSpine3D", "unispine-t1").train_time_s;
+        assert_eq!(ours_fe, 7.0 * 60.0);
+        ratio(row("FeSpine3D", "intratomo").train_time_s, ours_fe, 4.1, 1);
+        ratio(row("FeSpine3D", "nerf").train_time_s, ours_fe, 66.6, 1);
+        ratio(148.50, row("FeSpine3D", "naf").fps.unwrap(), 646.0, 0);
+        // Every baseline of each dataset is slower to train than ours.
+        for r in t1.iter().filter(|r| r.method != "unispine-t1") {
+            let ours = if r.dataset == "FeSpine3D" {
+                ours_fe
+            } else {
+                ours_ct.train_time_s
+            };
+            assert!(r.train_time_s > ours, "{} {}", r.dataset, r.method);
+        }
+    }
 }
