@@ -602,4 +602,19 @@ mod tests {
             assert!(r.train_time_s > ours, "{} {}", r.dataset, r.method);
         }
     }
+
+    #[test]
+    fn a_paper_row_is_found_by_dataset_and_method_together() {
+        let r = paper_row("CTSpine3D", "xgaussian").unwrap();
+        assert_eq!(
+            (r.table, r.psnr, r.ssim, r.train_time_s),
+            (2, 46.04, 0.9926, 756.0)
+        );
+        let r = paper_row("FeSpine3D", "xgaussian").unwrap();
+        assert_eq!((r.psnr, r.train_time_s), (39.91, 782.0));
+        let r = paper_row("FeSpine3D", "naf").unwrap();
+        assert_eq!((r.table, r.psnr, r.fps), (1, 23.78, Some(0.23)));
+        assert!(paper_row("CTSpine3D", "no-such-method").is_none());
+        assert!(paper_row("Other", "xgaussian").is_none());
+    }
 }
