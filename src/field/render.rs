@@ -151,3 +151,41 @@ pub fn line_integral_vjp<R: Real>(g_acc: R, delta: &[R], g_mu: &mut [R]) {
         *g = g_acc * *d;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each pixel's ray, followed for DSD, reaches that pixel's centre on the detector, placed
+    /// from the convention alone (NAF / X-Gaussian pose: source at DSO (cos a, sin a, 0),
+    /// detector axes u = (-sin a, cos a, 0), v = (0, 0, -1), the detector DSD from the source
+    /// along -(cos a, sin a, 0); pixel centre u = (col + 1/2 - W/2) du + offU, likewise v).
+    #[test]
+    fn a_pixel_ray_reaches_its_pixel_centre_on_the_detector() {
+        let geo = ConeBeam {
+            off_detector: [7.0, -4.5],
+            ..ConeBeam::centred([6, 9], [0.8, 1.3], [4, 4, 4], [1.0; 3])
+        };
+        let (w, h) = (9usize, 6usize);
+        for a in [0.0, 0.7, 2.9] {
+            let cam = Camera::new(&geo, a);
+            let (s, c) = f64::sin_cos(a);
+            let src = [geo.dso * c, geo.dso * s, 0.0];
+            let (eu, ev, ez) = ([-s, c, 0.0], [0.0, 0.0, -1.0], [-c, -s, 0.0]);
+            for (col, row) in [(0, 0), (w - 1, 0), (0, h - 1), (w - 1, h - 1), (4, 2)] {
+                let u = (col as f64 + 0.5 - w as f64 / 2.0) * 1.3 + 7.0;
+                let v = (row as f64 + 0.5 - h as f64 / 2.0) * 0.8 - 4.5;
+                let r = pixel_ray(&cam, col, row);
+                for k in 0..3 {
+                    let p = (src[k] + geo.dsd * ez[k] + u * eu[k] + v * ev[k]) / MM;
+                    assert!((r.o[k] - src[k] / MM).abs() < 1e-12);
+                    let hit = r.o[k] + r.d[k] * geo.dsd / MM;
+                    assert!(
+                        (hit - p).abs() < 1e-12,
+                        "angle {a} pixel ({col}, {row}) axis {k}"
+                    );
+                }
+            }
+        }
+    }
+}
