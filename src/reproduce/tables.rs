@@ -387,8 +387,23 @@ pub fn write_all(
 
 #[cfg(test)]
 mod tests {
-    use super::{pm_sig, provenance, Row};
+    use super::{pm_sig, provenance, results_part, Row, WHAT_RUNS};
     use crate::doc::{Block, Doc};
+
+    #[test]
+    fn the_terminal_part_ends_before_what_each_row_runs() {
+        let mut d = Doc::new();
+        d.heading(1, "t");
+        d.heading(2, "ds");
+        d.para("p");
+        d.heading(2, WHAT_RUNS);
+        d.list(vec!["x".into()]);
+        d.heading(2, "Verdicts");
+        assert_eq!(results_part(&d).blocks, d.blocks[..3]);
+        // Without that heading: everything.
+        d.blocks.remove(3);
+        assert_eq!(results_part(&d), d);
+    }
 
     #[test]
     fn a_data_condition_s_dataset_is_named_beside_its_checksum() {
