@@ -73,7 +73,7 @@ pub fn escape(s: &str) -> String {
 
 /// Inline Markdown to HTML: escaped, `` ` `` and `**` spans as `<code>` and `<b>` (a span left
 /// open is closed at the end).
-pub fn inline_html(t: &str) -> String {
+fn inline_html(t: &str) -> String {
     let e = escape(t);
     let mut out = String::with_capacity(e.len());
     let (mut code, mut bold) = (false, false);

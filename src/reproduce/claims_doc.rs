@@ -85,12 +85,11 @@ pub fn render(plan: &Plan, rows: &[Row], h: &Header) -> Doc {
          larger).",
     );
     d.heading(2, "At the base point");
-    let mut t = magnitude::table(&magnitude::scoped(plan, rows), |x| {
-        x.verdict.claim.text.clone()
-    });
-    t.head[3] = "effect".into();
-    t.head[5] = "paper".into();
-    d.table(t);
+    d.table(magnitude::table(
+        &magnitude::scoped(plan, rows),
+        "effect",
+        "paper",
+    ));
     let conds = holds::describe_conditions(plan);
     if !conds.is_empty() {
         d.append(conds);
