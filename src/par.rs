@@ -33,6 +33,25 @@ pub fn det_sum_by<F: Fn(usize) -> f64 + Sync>(n: usize, f: F) -> f64 {
         .sum()
 }
 
+/// The two sums of `f(i) = (a_i, b_i)` for `i in 0..n` in one pass, each bit-identical to
+/// [`det_sum_by`] of its component (the same chunks, each summed in order from -0.0 as
+/// `Iterator::sum` does, the chunks' sums added in order).
+pub fn det_sum2_by<F: Fn(usize) -> (f64, f64) + Sync>(n: usize, f: F) -> (f64, f64) {
+    let chunks = n.div_ceil(CHUNK);
+    (0..chunks)
+        .into_par_iter()
+        .map(|c| {
+            let lo = c * CHUNK;
+            let hi = (lo + CHUNK).min(n);
+            (lo..hi)
+                .map(&f)
+                .fold((-0.0, -0.0), |(a, b), (x, y)| (a + x, b + y))
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold((-0.0, -0.0), |(a, b), (x, y)| (a + x, b + y))
+}
+
 /// Lock `m`. A lock poisoned by a panic on another thread (which rayon or the thread scope
 /// re-raises on the caller) still holds valid data, so its guard is taken rather than a second
 /// panic raised.
@@ -81,5 +100,26 @@ mod tests {
         assert!(bits.iter().step_by(2).all(|b| *b == bits[0]));
         assert!(bits.iter().skip(1).step_by(2).all(|b| *b == bits[1]));
         assert_eq!(bits[0], bits[1]);
+    }
+
+    #[test]
+    fn det_sum2_by_gives_the_bits_of_two_det_sums() {
+        // Signed zeros alone (the sum of -0.0s is -0.0), a chunk and a half, and values whose
+        // order matters in f64.
+        let a: Vec<f64> = (0..6151)
+            .map(|i| match i % 5 {
+                0 => -0.0,
+                1 => 1e16,
+                2 => -1e16,
+                _ => (i as f64).sin() * 1e-3,
+            })
+            .collect();
+        let b: Vec<f64> = vec![-0.0; 6151];
+        for n in [0, 1, 5, 4096, 6151] {
+            let (s, t) = det_sum2_by(n, |i| (a[i], b[i]));
+            assert_eq!(s.to_bits(), det_sum_by(n, |i| a[i]).to_bits(), "n = {n}");
+            assert_eq!(t.to_bits(), det_sum_by(n, |i| b[i]).to_bits(), "n = {n}");
+        }
+        assert!(det_sum2_by(3, |i| (b[i], b[i])).0.is_sign_negative());
     }
 }

@@ -12,6 +12,7 @@
 
 use std::time::Instant;
 
+use super::median;
 use crate::drr::grid::clip_ray;
 use crate::drr::{siddon, trilinear, MarchLanes, Method, Projector};
 use crate::error::Result;
@@ -99,11 +100,6 @@ fn timed<T>(f: impl FnOnce() -> T) -> (T, f64, f64) {
     let (c0, t0) = (cpu_seconds(), Instant::now());
     let v = f();
     (v, t0.elapsed().as_secs_f64(), cpu_seconds() - c0)
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }
 
 /// Time `method` at `angle_deg` with a `size`^2 detector on each of `paths` (an instruction set

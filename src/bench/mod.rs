@@ -7,14 +7,23 @@
 //!   and geometry every benchmark and the determinism tests share;
 //! - [`train`]: where one training iteration's time goes, stage by stage;
 //! - [`field`]: the neural-field baselines (peak f32 rate, the MLP's products, iterations);
-//! - [`drr`]: the DRR projectors on every instruction set.
+//! - [`drr`]: the DRR projectors on every instruction set;
+//! - [`loss`]: the loss stage (SSIM's fused kernels against its definition).
 //!
 //! [`render`]: crate::bench::render
 //! [`train`]: crate::bench::train
 //! [`field`]: crate::bench::field
 //! [`drr`]: crate::bench::drr
+//! [`loss`]: crate::bench::loss
 
 pub mod drr;
 pub mod field;
+pub mod loss;
 pub mod render;
 pub mod train;
+
+/// The median of `v` (the upper one of an even count); `v` must not be empty.
+pub(crate) fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}

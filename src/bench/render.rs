@@ -13,6 +13,7 @@ use std::time::Instant;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use super::median;
 use crate::gaussians::model::N_FEATURES;
 use crate::gaussians::Gaussians;
 use crate::geometry::ConeBeam;
@@ -178,11 +179,6 @@ pub fn process_cpu_seconds() -> Option<f64> {
     let f: Vec<&str> = s.rsplit(')').next()?.split_whitespace().collect();
     let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
     Some(ticks / 100.0)
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
 }
 
 /// Time `reps` forward and forward + backward passes of the CT-like scene (f32, paper RIRF,

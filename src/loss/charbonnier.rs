@@ -17,8 +17,9 @@
 use rayon::prelude::*;
 
 use crate::image2d::Image2d;
-use crate::par::{det_sum_by, CHUNK};
+use crate::par::{det_sum2_by, det_sum_by, CHUNK};
 use crate::real::Real;
+use crate::simd::Simd;
 
 fn check_same<R: Real>(a: &Image2d<R>, b: &Image2d<R>, what: &str) {
     assert!(
@@ -101,11 +102,57 @@ pub fn weighted_charbonnier<R: Real>(
     let n = render.data.len();
     let e = |p: usize| render.data[p].f64() - gt.data[p].f64();
     let w = |p: usize| weights.map_or(1.0, |w| w.data[p].f64());
-    let num = det_sum_by(n, |p| w(p) * rho(e(p), eps));
-    let den = det_sum_by(n, w) + delta;
-    let grad = grad_image(render, |p| {
-        let d = e(p);
-        w(p) * d / rho(d, eps) / den
+    let (num, den) = det_sum2_by(n, |p| {
+        let wp = w(p);
+        (wp * rho(e(p), eps), wp)
     });
+    let den = den + delta;
+    let simd = Simd::active().or_narrower();
+    let mut grad = Image2d::filled(render.width, render.height, R::zero());
+    grad.data
+        .par_chunks_mut(CHUNK)
+        .enumerate()
+        .for_each(|(c, o)| {
+            let span = c * CHUNK..c * CHUNK + o.len();
+            let (r, g) = (&render.data[span.clone()], &gt.data[span.clone()]);
+            let w = weights.map(|w| &w.data[span]);
+            match simd {
+                // SAFETY: `or_narrower` returns an instruction set the CPU supports.
+                #[cfg(target_arch = "x86_64")]
+                Simd::Avx512 => unsafe { weighted_grad_avx512(o, r, g, w, eps, den) },
+                #[cfg(target_arch = "x86_64")]
+                Simd::Avx2 => unsafe { weighted_grad_avx2(o, r, g, w, eps, den) },
+                _ => weighted_grad(o, r, g, w, eps, den),
+            }
+        });
     (num / den, grad)
+}
+
+/// The weighted Charbonnier gradient `w e / rho(e) / den` (w = 1 without weights) of a run of
+/// pixels, in f64 rounded once to `R`, written over `o`.
+#[inline(always)]
+fn weighted_grad<R: Real>(o: &mut [R], r: &[R], g: &[R], w: Option<&[R]>, eps: f64, den: f64) {
+    let n = o.len();
+    let (r, g) = (&r[..n], &g[..n]);
+    match w {
+        Some(w) => {
+            let w = &w[..n];
+            for p in 0..n {
+                let d = r[p].f64() - g[p].f64();
+                o[p] = R::c(w[p].f64() * d / rho(d, eps) / den);
+            }
+        }
+        None => {
+            for p in 0..n {
+                let d = r[p].f64() - g[p].f64();
+                o[p] = R::c(1.0 * d / rho(d, eps) / den);
+            }
+        }
+    }
+}
+
+crate::simd::wide_kernels! {
+    unsafe fn [R: Real](o: &mut [R], r: &[R], g: &[R], w: Option<&[R]>, eps: f64, den: f64);
+    weighted_grad_avx2 => { weighted_grad(o, r, g, w, eps, den) }
+    weighted_grad_avx512 => { weighted_grad(o, r, g, w, eps, den) }
 }

@@ -30,17 +30,19 @@ pub fn gaussian_kernel(size: usize, sigma: f64, extra_norm_eps: f64) -> Vec<f64>
     g.into_iter().map(|v| v / s).collect()
 }
 
-fn cast_kernel<R: Real>(k: &[f64]) -> Vec<R> {
+pub(super) fn cast_kernel<R: Real>(k: &[f64]) -> Vec<R> {
     k.iter().map(|&v| R::c(v)).collect()
 }
 
-/// One output row of [`correlate_rows`] (`o` zeroed, `xi` the input row).
+/// One output row of [`correlate_rows`] (`xi` the input row), written over `o`.
 #[inline(always)]
-fn row_kernel<R: Real>(o: &mut [R], xi: &[R], k: &[R]) {
+pub(super) fn row_kernel<R: Real>(o: &mut [R], xi: &[R], k: &[R]) {
     let w = o.len();
     let r = k.len() / 2;
     // Per pixel: acc = 0 + k[t_lo] x[..] + k[t_lo + 1] x[..] + ..., taps ascending (the loop
-    // runs over taps outside and pixels inside so that it vectorises).
+    // runs over taps outside and pixels inside so that it vectorises). Pixel j's first tap is
+    // t = 0 for j >= r, which writes `0 + k x`; the first r pixels start from 0.
+    o[..r.min(w)].fill(R::zero());
     for (t, &kt) in k.iter().enumerate() {
         // Pixels j with 0 <= j + t - r < w.
         let j_lo = r.saturating_sub(t);
@@ -49,24 +51,47 @@ fn row_kernel<R: Real>(o: &mut [R], xi: &[R], k: &[R]) {
             continue;
         }
         let src = &xi[j_lo + t - r..j_hi + t - r];
-        for (oj, &xj) in o[j_lo..j_hi].iter_mut().zip(src) {
-            *oj += kt * xj;
+        let dst = &mut o[j_lo..j_hi];
+        if t == 0 {
+            for (oj, &xj) in dst.iter_mut().zip(src) {
+                *oj = R::zero() + kt * xj;
+            }
+        } else {
+            for (oj, &xj) in dst.iter_mut().zip(src) {
+                *oj += kt * xj;
+            }
         }
     }
 }
 
-/// Output row `i` of [`correlate_cols`] (`o` zeroed) from the whole input `x` of height `h`.
+/// Output row `i` of [`correlate_cols`], written over `o`, from the whole input `x` of height
+/// `h`, whose rows start `stride` values apart (row `a` is `x[a * stride..a * stride + o.len()]`).
 #[inline(always)]
-fn col_kernel<R: Real>(o: &mut [R], x: &[R], h: usize, i: usize, k: &[R]) {
+pub(super) fn col_kernel<R: Real>(
+    o: &mut [R],
+    x: &[R],
+    stride: usize,
+    h: usize,
+    i: usize,
+    k: &[R],
+) {
     let w = o.len();
     let r = k.len() / 2;
     let t_lo = r.saturating_sub(i);
     let t_hi = k.len().min(h + r - i);
-    // Per pixel: acc = 0 + k[t_lo] x[..] + k[t_lo + 1] x[..] + ..., taps ascending.
+    // Per pixel: acc = 0 + k[t_lo] x[..] + k[t_lo + 1] x[..] + ..., taps ascending; every pixel
+    // of the row has the same taps (t_lo < t_hi as i < h), the first writes `0 + k x`.
     for (t, &kt) in k.iter().enumerate().take(t_hi).skip(t_lo) {
-        let src = &x[(i + t - r) * w..(i + t - r + 1) * w];
-        for (oj, &xj) in o.iter_mut().zip(src) {
-            *oj += kt * xj;
+        let a = (i + t - r) * stride;
+        let src = &x[a..a + w];
+        if t == t_lo {
+            for (oj, &xj) in o.iter_mut().zip(src) {
+                *oj = R::zero() + kt * xj;
+            }
+        } else {
+            for (oj, &xj) in o.iter_mut().zip(src) {
+                *oj += kt * xj;
+            }
         }
     }
 }
@@ -78,9 +103,46 @@ crate::simd::wide_kernels! {
 }
 
 crate::simd::wide_kernels! {
-    unsafe fn [R: Real](o: &mut [R], x: &[R], h: usize, i: usize, k: &[R]);
-    col_kernel_avx2 => { col_kernel(o, x, h, i, k) }
-    col_kernel_avx512 => { col_kernel(o, x, h, i, k) }
+    unsafe fn [R: Real](o: &mut [R], x: &[R], stride: usize, h: usize, i: usize, k: &[R]);
+    col_kernel_avx2 => { col_kernel(o, x, stride, h, i, k) }
+    col_kernel_avx512 => { col_kernel(o, x, stride, h, i, k) }
+}
+
+/// One row of a row correlation with `k` (zero padding): `o[j] = sum_t k[t] xi[j + t - r]`,
+/// taps ascending, written over `o`; `simd` must come from [`Simd::or_narrower`].
+#[inline]
+fn correlate_row<R: Real>(simd: Simd, o: &mut [R], xi: &[R], k: &[R]) {
+    match simd {
+        // SAFETY: the caller passes an instruction set from `or_narrower`, which the CPU supports.
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx512 => unsafe { row_kernel_avx512(o, xi, k) },
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx2 => unsafe { row_kernel_avx2(o, xi, k) },
+        _ => row_kernel(o, xi, k),
+    }
+}
+
+/// Output row `i` of a column correlation with `k` (zero padding) of the image of height `h`
+/// whose rows start `stride` values apart in `x`: `o[j] = sum_t k[t] x[(i + t - r) stride + j]`,
+/// taps ascending, written over `o`; `simd` must come from [`Simd::or_narrower`].
+#[inline]
+fn correlate_col<R: Real>(
+    simd: Simd,
+    o: &mut [R],
+    x: &[R],
+    stride: usize,
+    h: usize,
+    i: usize,
+    k: &[R],
+) {
+    match simd {
+        // SAFETY: the caller passes an instruction set from `or_narrower`, which the CPU supports.
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx512 => unsafe { col_kernel_avx512(o, x, stride, h, i, k) },
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx2 => unsafe { col_kernel_avx2(o, x, stride, h, i, k) },
+        _ => col_kernel(o, x, stride, h, i, k),
+    }
 }
 
 /// 1D correlation of every row with `k` (odd length, centre `k.len() / 2`), zero padding:
@@ -95,14 +157,7 @@ fn correlate_rows<R: Real>(simd: Simd, x: &Image2d<R>, k: &[R]) -> Image2d<R> {
     out.data
         .par_chunks_mut(w)
         .zip(x.data.par_chunks(w))
-        .for_each(|(o, xi)| match simd {
-            // SAFETY: `or_narrower` returns an instruction set the CPU supports.
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx512 => unsafe { row_kernel_avx512(o, xi, k) },
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx2 => unsafe { row_kernel_avx2(o, xi, k) },
-            _ => row_kernel(o, xi, k),
-        });
+        .for_each(|(o, xi)| correlate_row(simd, o, xi, k));
     out
 }
 
@@ -119,14 +174,7 @@ fn correlate_cols<R: Real>(simd: Simd, x: &Image2d<R>, k: &[R]) -> Image2d<R> {
     out.data
         .par_chunks_mut(w)
         .enumerate()
-        .for_each(|(i, o)| match simd {
-            // SAFETY: `or_narrower` returns an instruction set the CPU supports.
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx512 => unsafe { col_kernel_avx512(o, xd, h, i, k) },
-            #[cfg(target_arch = "x86_64")]
-            Simd::Avx2 => unsafe { col_kernel_avx2(o, xd, h, i, k) },
-            _ => col_kernel(o, xd, h, i, k),
-        });
+        .for_each(|(i, o)| correlate_col(simd, o, xd, w, h, i, k));
     out
 }
 

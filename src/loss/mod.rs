@@ -19,6 +19,7 @@ pub mod ssim;
 use rayon::prelude::*;
 
 use crate::image2d::Image2d;
+use crate::par::CHUNK;
 use crate::real::Real;
 
 crate::choice! {
@@ -124,7 +125,7 @@ pub fn forward_backward<R: Real>(
     weights: Option<&Image2d<R>>,
     cfg: &LossConfig,
 ) -> (LossValue, Image2d<R>) {
-    let (data, g_data) = match cfg.data_term {
+    let (data, mut grad) = match cfg.data_term {
         DataTerm::L1 => charbonnier::l1(render, gt),
         DataTerm::Charbonnier => charbonnier::charbonnier(render, gt, cfg.charbonnier_eps),
         DataTerm::WeightedCharbonnier => {
@@ -143,18 +144,20 @@ pub fn forward_backward<R: Real>(
     // Eq. (8).
     let total = (1.0 - lam) * data + lam * (1.0 - s);
     let (a, b) = (R::c(1.0 - lam), R::c(lam));
-    let grad = g_data
-        .data
-        .par_iter()
-        .zip(&g_ssim.data)
-        .map(|(&gd, &gs)| a * gd - b * gs)
-        .collect();
+    grad.data
+        .par_chunks_mut(CHUNK)
+        .zip(g_ssim.data.par_chunks(CHUNK))
+        .for_each(|(gd, gs)| {
+            for (d, &s) in gd.iter_mut().zip(gs) {
+                *d = a * *d - b * s;
+            }
+        });
     (
         LossValue {
             total,
             data,
             ssim: s,
         },
-        Image2d::from_vec(render.width, render.height, grad),
+        grad,
     )
 }

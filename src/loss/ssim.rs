@@ -19,13 +19,24 @@
 //!
 //! The maps are computed in the precision `R` (as upstream computes them in f32); the mean is a
 //! deterministic f64 reduction ([`crate::par`]).
+//!
+//! The kernels here are fused: one pass over the rows correlates x, y and the three products
+//! (formed a row at a time) horizontally; one pass over the output rows correlates those five
+//! vertically and forms S and the three partials in the same row; the backward correlates the
+//! partials vertically and then horizontally a row at a time and adds the three terms. Every
+//! pixel sums the same products in the same order as the five whole-image blurs of
+//! [`reference`] (the definition, kept as the oracle), so the bits are the same, on every SIMD
+//! path and thread count, with nine image-sized buffers fewer and a third of the passes.
 
 use rayon::prelude::*;
 
-use super::filters::{blur, blur_adjoint, gaussian_kernel};
+use super::filters::{cast_kernel, col_kernel, gaussian_kernel, row_kernel};
 use crate::image2d::Image2d;
-use crate::par::{det_sum_by, CHUNK};
+use crate::par::det_sum_by;
 use crate::real::Real;
+use crate::simd::Simd;
+
+pub mod reference;
 
 /// Window side (11) and Gaussian sigma (1.5).
 pub const WINDOW: usize = 11;
@@ -50,42 +61,14 @@ fn check_same<R: Real>(a: &Image2d<R>, b: &Image2d<R>) {
     );
 }
 
-fn zip_map<R: Real, F: Fn(R, R) -> R + Sync>(a: &Image2d<R>, b: &Image2d<R>, f: F) -> Image2d<R> {
-    let data = a
-        .data
-        .par_iter()
-        .zip(&b.data)
-        .map(|(&x, &y)| f(x, y))
-        .collect();
-    Image2d::from_vec(a.width, a.height, data)
-}
-
-/// The five window statistics of (x, y).
-struct Stats<R: Real> {
-    mu_x: Image2d<R>,
-    mu_y: Image2d<R>,
-    e_xx: Image2d<R>,
-    e_yy: Image2d<R>,
-    e_xy: Image2d<R>,
-}
-
-fn stats<R: Real>(x: &Image2d<R>, y: &Image2d<R>, k: &[f64]) -> Stats<R> {
-    Stats {
-        mu_x: blur(x, k),
-        mu_y: blur(y, k),
-        e_xx: blur(&zip_map(x, x, |a, b| a * b), k),
-        e_yy: blur(&zip_map(y, y, |a, b| a * b), k),
-        e_xy: blur(&zip_map(x, y, |a, b| a * b), k),
-    }
-}
-
-/// Per-pixel terms (A1, A2, B1, B2) at pixel `p`.
+/// Per-pixel terms (mu_x, mu_y, A1, A2, B1, B2) from the five window statistics
+/// `[mu_x, mu_y, W*(x x), W*(y y), W*(x y)]`.
 #[inline(always)]
-fn terms<R: Real>(s: &Stats<R>, p: usize) -> (R, R, R, R, R, R) {
-    let (mx, my) = (s.mu_x.data[p], s.mu_y.data[p]);
-    let sxx = s.e_xx.data[p] - mx * mx;
-    let syy = s.e_yy.data[p] - my * my;
-    let sxy = s.e_xy.data[p] - mx * my;
+fn terms<R: Real>(st: [R; 5]) -> (R, R, R, R, R, R) {
+    let [mx, my, exx, eyy, exy] = st;
+    let sxx = exx - mx * mx;
+    let syy = eyy - my * my;
+    let sxy = exy - mx * my;
     let two = R::c(2.0);
     let a1 = two * mx * my + R::c(C1);
     let a2 = two * sxy + R::c(C2);
@@ -94,18 +77,216 @@ fn terms<R: Real>(s: &Stats<R>, p: usize) -> (R, R, R, R, R, R) {
     (mx, my, a1, a2, b1, b2)
 }
 
+/// S at a pixel and the three partials dS/dmu_x, dS/de_xx, dS/de_xy times `inv_n`.
+#[inline(always)]
+fn partials<R: Real>(st: [R; 5], inv_n: R) -> (R, [R; 3]) {
+    let (mx, my, a1, a2, b1, b2) = terms(st);
+    // S exactly as in `ssim_map` (so the value is bit-identical to `ssim`); the partials with
+    // two reciprocals instead of five divisions.
+    let sv = (a1 * a2) / (b1 * b2);
+    let (ib1, ib2) = (R::one() / b1, R::one() / b2);
+    let ib = ib1 * ib2;
+    let two = R::c(2.0);
+    let d_mu = two * my * (a2 - a1) * ib - two * mx * sv * (ib1 - ib2);
+    let d_exx = -sv * ib2;
+    let d_exy = two * a1 * ib;
+    (sv, [d_mu * inv_n, d_exx * inv_n, d_exy * inv_n])
+}
+
+/// Calls the row kernel `$name` (`$name_avx2`, `$name_avx512` its wide builds) with the
+/// instruction set `$simd` (from [`Simd::or_narrower`]).
+macro_rules! per_simd {
+    ($simd:expr, $scalar:ident, $avx2:ident, $avx512:ident ($($arg:expr),* $(,)?)) => {
+        match $simd {
+            // SAFETY: `or_narrower` returns an instruction set the CPU supports.
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => unsafe { $avx512($($arg),*) },
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { $avx2($($arg),*) },
+            _ => $scalar($($arg),*),
+        }
+    };
+}
+
+/// Row `i` of the row pass, written over `o` (5 w values): x, y, x x, y y and x y correlated
+/// along the row with `k`, side by side; `prod` is scratch of 3 w values.
+#[inline(always)]
+fn stats_row<R: Real>(o: &mut [R], prod: &mut [R], xi: &[R], yi: &[R], k: &[R]) {
+    let w = xi.len();
+    let (xi, yi) = (&xi[..w], &yi[..w]);
+    let (pxx, rest) = prod.split_at_mut(w);
+    let (pyy, pxy) = rest.split_at_mut(w);
+    let (pyy, pxy) = (&mut pyy[..w], &mut pxy[..w]);
+    for j in 0..w {
+        pxx[j] = xi[j] * xi[j];
+        pyy[j] = yi[j] * yi[j];
+        pxy[j] = xi[j] * yi[j];
+    }
+    for (os, src) in o.chunks_mut(w).zip([xi, yi, &*pxx, &*pyy, &*pxy]) {
+        row_kernel(os, src, k);
+    }
+}
+
+/// Output row `i` of the five statistics, written over `st` (5 w values), from the row pass
+/// `rows` (image height `h`).
+#[inline(always)]
+fn col_stats<R: Real>(st: &mut [R], rows: &[R], h: usize, i: usize, k: &[R]) {
+    let w = st.len() / 5;
+    for (s, o) in st.chunks_mut(w).enumerate() {
+        col_kernel(o, &rows[s * w..], 5 * w, h, i, k);
+    }
+}
+
+/// Row `i` of the SSIM map, written over `o`; `st` is scratch of 5 w values.
+#[inline(always)]
+fn map_row<R: Real>(o: &mut [R], st: &mut [R], rows: &[R], h: usize, i: usize, k: &[R]) {
+    let w = o.len();
+    col_stats(st, rows, h, i, k);
+    let [mx, my, exx, eyy, exy] = split5(st, w);
+    for j in 0..w {
+        let (_, _, a1, a2, b1, b2) = terms([mx[j], my[j], exx[j], eyy[j], exy[j]]);
+        o[j] = (a1 * a2) / (b1 * b2);
+    }
+}
+
+/// Row `i` of S (`o_s`) and of the three partials times `inv_n` (`o_d`, 3 w values side by
+/// side); `st` is scratch of 5 w values.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn partials_row<R: Real>(
+    o_s: &mut [R],
+    o_d: &mut [R],
+    st: &mut [R],
+    rows: &[R],
+    h: usize,
+    i: usize,
+    k: &[R],
+    inv_n: R,
+) {
+    let w = o_s.len();
+    col_stats(st, rows, h, i, k);
+    let [mx, my, exx, eyy, exy] = split5(st, w);
+    let (o_mu, rest) = o_d.split_at_mut(w);
+    let (o_xx, o_xy) = rest.split_at_mut(w);
+    let (o_xx, o_xy) = (&mut o_xx[..w], &mut o_xy[..w]);
+    for j in 0..w {
+        let (s, d) = partials([mx[j], my[j], exx[j], eyy[j], exy[j]], inv_n);
+        o_s[j] = s;
+        o_mu[j] = d[0];
+        o_xx[j] = d[1];
+        o_xy[j] = d[2];
+    }
+}
+
+/// Row `i` of d mean(S) / dx = W^T d_mu + 2 x W^T d_xx + y W^T d_xy, written over `o`: each
+/// partial of `parts` correlated along the columns, then along the row, with the reversed
+/// window `kr` (the adjoint of the blur); `col` (w values) and `g` (3 w) are scratch.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn grad_row<R: Real>(
+    o: &mut [R],
+    col: &mut [R],
+    g: &mut [R],
+    parts: &[R],
+    xi: &[R],
+    yi: &[R],
+    h: usize,
+    i: usize,
+    kr: &[R],
+) {
+    let w = o.len();
+    for (s, gs) in g.chunks_mut(w).enumerate() {
+        col_kernel(col, &parts[s * w..], 3 * w, h, i, kr);
+        row_kernel(gs, col, kr);
+    }
+    let (g_mu, rest) = g.split_at(w);
+    let (g_xx, g_xy) = rest.split_at(w);
+    let (g_xx, g_xy, xi, yi) = (&g_xx[..w], &g_xy[..w], &xi[..w], &yi[..w]);
+    let two = R::c(2.0);
+    for j in 0..w {
+        o[j] = g_mu[j] + two * xi[j] * g_xx[j] + yi[j] * g_xy[j];
+    }
+}
+
+/// The five rows of `st` (5 w values), each exactly `w` long.
+#[inline(always)]
+fn split5<R: Real>(st: &[R], w: usize) -> [&[R]; 5] {
+    [0, 1, 2, 3, 4].map(|s| &st[s * w..(s + 1) * w])
+}
+
+crate::simd::wide_kernels! {
+    unsafe fn [R: Real](o: &mut [R], prod: &mut [R], xi: &[R], yi: &[R], k: &[R]);
+    stats_row_avx2 => { stats_row(o, prod, xi, yi, k) }
+    stats_row_avx512 => { stats_row(o, prod, xi, yi, k) }
+}
+
+crate::simd::wide_kernels! {
+    unsafe fn [R: Real](o: &mut [R], st: &mut [R], rows: &[R], h: usize, i: usize, k: &[R]);
+    map_row_avx2 => { map_row(o, st, rows, h, i, k) }
+    map_row_avx512 => { map_row(o, st, rows, h, i, k) }
+}
+
+crate::simd::wide_kernels! {
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn [R: Real](o_s: &mut [R], o_d: &mut [R], st: &mut [R], rows: &[R], h: usize, i: usize, k: &[R], inv_n: R);
+    partials_row_avx2 => { partials_row(o_s, o_d, st, rows, h, i, k, inv_n) }
+    partials_row_avx512 => { partials_row(o_s, o_d, st, rows, h, i, k, inv_n) }
+}
+
+crate::simd::wide_kernels! {
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn [R: Real](o: &mut [R], col: &mut [R], g: &mut [R], parts: &[R], xi: &[R], yi: &[R], h: usize, i: usize, kr: &[R]);
+    grad_row_avx2 => { grad_row(o, col, g, parts, xi, yi, h, i, kr) }
+    grad_row_avx512 => { grad_row(o, col, g, parts, xi, yi, h, i, kr) }
+}
+
+/// The five statistics correlated along rows, row `i` of each side by side:
+/// `out[(5 i + s) w..(5 i + s + 1) w]` for s = x, y, x x, y y, x y.
+fn row_pass<R: Real>(simd: Simd, x: &Image2d<R>, y: &Image2d<R>, k: &[R]) -> Vec<R> {
+    let w = x.width;
+    let mut out = vec![R::zero(); 5 * x.data.len()];
+    out.par_chunks_mut(5 * w)
+        .zip(x.data.par_chunks(w).zip(y.data.par_chunks(w)))
+        .for_each_init(
+            || vec![R::zero(); 3 * w],
+            |prod, (o, (xi, yi))| {
+                per_simd!(
+                    simd,
+                    stats_row,
+                    stats_row_avx2,
+                    stats_row_avx512(o, prod, xi, yi, k)
+                )
+            },
+        );
+    out
+}
+
 /// The SSIM map S (same size as the inputs).
 pub fn ssim_map<R: Real>(x: &Image2d<R>, y: &Image2d<R>) -> Image2d<R> {
+    ssim_map_with(Simd::active(), x, y)
+}
+
+/// [`ssim_map`] with the instruction set `simd` (or the widest supported narrower one); every
+/// path gives the same bits.
+pub fn ssim_map_with<R: Real>(simd: Simd, x: &Image2d<R>, y: &Image2d<R>) -> Image2d<R> {
     check_same(x, y);
-    let s = stats(x, y, &window());
-    let data = (0..x.data.len())
-        .into_par_iter()
-        .map(|p| {
-            let (_, _, a1, a2, b1, b2) = terms(&s, p);
-            (a1 * a2) / (b1 * b2)
-        })
-        .collect();
-    Image2d::from_vec(x.width, x.height, data)
+    let simd = simd.or_narrower();
+    let (w, h) = (x.width, x.height);
+    let k = cast_kernel::<R>(&window());
+    let rows = row_pass(simd, x, y, &k);
+    let mut out = Image2d::filled(w, h, R::zero());
+    out.data.par_chunks_mut(w).enumerate().for_each_init(
+        || vec![R::zero(); 5 * w],
+        |st, (i, o)| {
+            per_simd!(
+                simd,
+                map_row,
+                map_row_avx2,
+                map_row_avx512(o, st, &rows, h, i, &k)
+            )
+        },
+    );
+    out
 }
 
 /// Mean SSIM of `a` against `b` (11x11 Gaussian window, sigma 1.5, zero padding).
@@ -116,51 +297,120 @@ pub fn ssim<R: Real>(a: &Image2d<R>, b: &Image2d<R>) -> f64 {
 
 /// Mean SSIM of `x` against `y` and its gradient with respect to `x`.
 pub fn ssim_forward_backward<R: Real>(x: &Image2d<R>, y: &Image2d<R>) -> (f64, Image2d<R>) {
+    ssim_forward_backward_with(Simd::active(), x, y)
+}
+
+/// [`ssim_forward_backward`] with the instruction set `simd` (or the widest supported narrower
+/// one); every path gives the same bits.
+pub fn ssim_forward_backward_with<R: Real>(
+    simd: Simd,
+    x: &Image2d<R>,
+    y: &Image2d<R>,
+) -> (f64, Image2d<R>) {
     check_same(x, y);
-    let k = window();
-    let s = stats(x, y, &k);
+    let simd = simd.or_narrower();
+    let (w, h) = (x.width, x.height);
     let n = x.data.len();
+    let k = cast_kernel::<R>(&window());
     let inv_n = R::c(1.0 / n as f64);
-    // Per pixel: S and the three partials (already divided by N), written straight into their
-    // images.
+    let rows = row_pass(simd, x, y, &k);
+    // Per output row: S, and the three partials side by side (`parts[(3 i + s) w..]`).
     let zero = R::zero();
-    let (mut sv_img, mut d_mu_img, mut d_xx_img, mut d_xy_img) =
-        (vec![zero; n], vec![zero; n], vec![zero; n], vec![zero; n]);
-    sv_img
-        .par_chunks_mut(CHUNK)
-        .zip(d_mu_img.par_chunks_mut(CHUNK))
-        .zip(d_xx_img.par_chunks_mut(CHUNK))
-        .zip(d_xy_img.par_chunks_mut(CHUNK))
+    let (mut sv, mut parts) = (vec![zero; n], vec![zero; 3 * n]);
+    sv.par_chunks_mut(w)
+        .zip(parts.par_chunks_mut(3 * w))
         .enumerate()
-        .for_each(|(c, (((o_s, o_mu), o_xx), o_xy))| {
-            for q in 0..o_s.len() {
-                let p = c * CHUNK + q;
-                let (mx, my, a1, a2, b1, b2) = terms(&s, p);
-                // S exactly as in `ssim_map` (so the value is bit-identical to `ssim`); the
-                // partials with two reciprocals instead of five divisions.
-                let sv = (a1 * a2) / (b1 * b2);
-                let (ib1, ib2) = (R::one() / b1, R::one() / b2);
-                let ib = ib1 * ib2;
-                let two = R::c(2.0);
-                let d_mu = two * my * (a2 - a1) * ib - two * mx * sv * (ib1 - ib2);
-                let d_exx = -sv * ib2;
-                let d_exy = two * a1 * ib;
-                o_s[q] = sv;
-                o_mu[q] = d_mu * inv_n;
-                o_xx[q] = d_exx * inv_n;
-                o_xy[q] = d_exy * inv_n;
+        .for_each_init(
+            || vec![zero; 5 * w],
+            |st, (i, (o_s, o_d))| {
+                per_simd!(
+                    simd,
+                    partials_row,
+                    partials_row_avx2,
+                    partials_row_avx512(o_s, o_d, st, &rows, h, i, &k, inv_n)
+                )
+            },
+        );
+    drop(rows);
+    let value = det_sum_by(n, |p| sv[p].f64()) / n as f64;
+    let kr: Vec<R> = k.iter().rev().copied().collect();
+    let mut grad = Image2d::filled(w, h, zero);
+    grad.data
+        .par_chunks_mut(w)
+        .zip(x.data.par_chunks(w).zip(y.data.par_chunks(w)))
+        .enumerate()
+        .for_each_init(
+            || (vec![zero; w], vec![zero; 3 * w]),
+            |(col, g), (i, (o, (xi, yi)))| {
+                per_simd!(
+                    simd,
+                    grad_row,
+                    grad_row_avx2,
+                    grad_row_avx512(o, col, g, &parts, xi, yi, h, i, &kr)
+                )
+            },
+        );
+    (value, grad)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn pair(w: usize, h: usize, seed: u64) -> (Image2d<f64>, Image2d<f64>) {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut img = || {
+            let v = (0..w * h).map(|_| rng.random::<f64>()).collect();
+            Image2d::from_vec(w, h, v)
+        };
+        (img(), img())
+    }
+
+    fn bits<R: Real>(im: &Image2d<R>) -> Vec<u64> {
+        im.data.iter().map(|v| v.f64().to_bits()).collect()
+    }
+
+    /// The fused kernels against the five whole-image blurs of [`reference`], bit for bit, on
+    /// every instruction set, in f32 and f64, on sides shorter and longer than the window and
+    /// widths that leave remainders for every lane count.
+    #[test]
+    fn fused_kernels_give_the_bits_of_the_definition() {
+        fn check<R: Real>(x: &Image2d<R>, y: &Image2d<R>) {
+            let (v0, g0) = reference::ssim_forward_backward(x, y);
+            let m0 = reference::ssim_map(x, y);
+            for p in Simd::ALL {
+                let (v, g) = ssim_forward_backward_with(p, x, y);
+                let what = format!("{p:?} {}x{}", x.width, x.height);
+                assert_eq!(v.to_bits(), v0.to_bits(), "value {what}");
+                assert_eq!(bits(&g), bits(&g0), "gradient {what}");
+                assert_eq!(bits(&ssim_map_with(p, x, y)), bits(&m0), "map {what}");
             }
-        });
-    let value = det_sum_by(n, |p| sv_img[p].f64()) / n as f64;
-    let img = |v: Vec<R>| Image2d::from_vec(x.width, x.height, v);
-    let (d_mu_img, d_xx_img, d_xy_img) = (img(d_mu_img), img(d_xx_img), img(d_xy_img));
-    let g_mu = blur_adjoint(&d_mu_img, &k);
-    let g_xx = blur_adjoint(&d_xx_img, &k);
-    let g_xy = blur_adjoint(&d_xy_img, &k);
-    let two = R::c(2.0);
-    let data = (0..n)
-        .into_par_iter()
-        .map(|p| g_mu.data[p] + two * x.data[p] * g_xx.data[p] + y.data[p] * g_xy.data[p])
-        .collect();
-    (value, Image2d::from_vec(x.width, x.height, data))
+        }
+        for (w, h) in [(37, 29), (203, 13), (5, 17), (16, 3), (1, 1), (1, 12)] {
+            let (x, y) = pair(w, h, (w * h) as u64);
+            check(&x, &y);
+            check::<f32>(&x.cast(), &y.cast());
+        }
+    }
+
+    #[test]
+    fn fused_kernels_are_thread_count_invariant() {
+        let (x, y) = pair(131, 70, 9);
+        let (x, y): (Image2d<f32>, Image2d<f32>) = (x.cast(), y.cast());
+        let run = |t: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(t)
+                .build()
+                .unwrap();
+            pool.install(|| ssim_forward_backward(&x, &y))
+        };
+        let (v1, g1) = run(1);
+        for t in [2, 3] {
+            let (v, g) = run(t);
+            assert_eq!(v.to_bits(), v1.to_bits());
+            assert_eq!(bits(&g), bits(&g1));
+        }
+    }
 }

@@ -29,6 +29,11 @@
 //!   the reference of the speed-ups; rays/s, voxel steps or samples per second, peak resident
 //!   memory against the volume's size, and the target (0.05 s per 256^2 view on 2 cores) with
 //!   the fraction reached.
+//!
+//! - `loss`: the loss stage ([`unispine::bench::loss`]): per square image size, SSIM forward +
+//!   backward with the fused kernels and as its definition (five whole-image blurs), measured
+//!   in turns in the same run, their ratio, and the whole loss of Eq. (8) (weighted
+//!   Charbonnier + SSIM); the run fails if the two SSIMs differ in any bit.
 
 mod field;
 mod train;
@@ -112,7 +117,8 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         "field" => field::run(&args),
         "train" => train::run(&args),
         "drr" => run_drr(&args),
-        k => bail!("unknown benchmark kind `{k}` (available: render, field, train, drr)"),
+        "loss" => run_loss(&args),
+        k => bail!("unknown benchmark kind `{k}` (available: render, field, train, drr, loss)"),
     }
 }
 
@@ -407,5 +413,37 @@ fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
          peak resident memory during the first projection over the volume's f32 size; of target \
          = {TARGET_S} s per 256^2 view (scaled by pixels) over cpu/thr"
     );
+    Ok(())
+}
+
+fn run_loss(args: &BenchArgs) -> anyhow::Result<()> {
+    use unispine::bench::loss::time_loss;
+    let sizes = if args.sizes.is_empty() {
+        vec![256, 1024]
+    } else {
+        args.sizes.clone()
+    };
+    println!(
+        "loss stage, f32, {} threads, {} path, median of {} reps (wall ms / process CPU ms)",
+        rayon::current_num_threads(),
+        unispine::simd::Simd::active().name(),
+        args.reps
+    );
+    println!(
+        "{:>6} {:>17} {:>17} {:>13} {:>17}",
+        "size", "ssim fused", "ssim definition", "ratio (CPU)", "whole loss"
+    );
+    for &size in &sizes {
+        let t = time_loss(size, args.reps)?;
+        let ms = |(w, c): (f64, f64)| format!("{w:.2} / {c:.2}");
+        println!(
+            "{:>6} {:>17} {:>17} {:>12.2}x {:>17}",
+            size,
+            ms(t.ssim_fused),
+            ms(t.ssim_reference),
+            t.ssim_reference.1 / t.ssim_fused.1,
+            ms(t.loss)
+        );
+    }
     Ok(())
 }
