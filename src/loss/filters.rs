@@ -34,43 +34,81 @@ pub(super) fn cast_kernel<R: Real>(k: &[f64]) -> Vec<R> {
     k.iter().map(|&v| R::c(v)).collect()
 }
 
+/// Pixels per register block of the filter kernels (`B`), per instruction set: the block's sums
+/// stay in registers while every tap is added (the output is written once instead of read and
+/// written once per tap), and there are enough of them (eight vectors of f32) for the adds'
+/// latency to overlap. The block changes no sum: each pixel adds its taps in the same order.
+pub(super) const BLOCK_AVX512: usize = 128;
+pub(super) const BLOCK_AVX2: usize = 64;
+pub(super) const BLOCK_SCALAR: usize = 16;
+
 /// One output row of [`correlate_rows`] (`xi` the input row), written over `o`.
+///
+/// Per pixel j: acc = 0 + k[t_lo] x[j + t_lo - r] + k[t_lo + 1] x[..] + ..., the taps that reach
+/// inside the row in ascending order (zero padding: the others are skipped, not added as 0).
 #[inline(always)]
-pub(super) fn row_kernel<R: Real>(o: &mut [R], xi: &[R], k: &[R]) {
+pub(super) fn row_kernel<R: Real, const B: usize>(o: &mut [R], xi: &[R], k: &[R]) {
     let w = o.len();
+    let xi = &xi[..w];
     let r = k.len() / 2;
-    // Per pixel: acc = 0 + k[t_lo] x[..] + k[t_lo + 1] x[..] + ..., taps ascending (the loop
-    // runs over taps outside and pixels inside so that it vectorises). Pixel j's first tap is
-    // t = 0 for j >= r, which writes `0 + k x`; the first r pixels start from 0.
-    o[..r.min(w)].fill(R::zero());
-    for (t, &kt) in k.iter().enumerate() {
-        // Pixels j with 0 <= j + t - r < w.
-        let j_lo = r.saturating_sub(t);
-        let j_hi = w.min((w + r).saturating_sub(t));
-        if j_lo >= j_hi {
-            continue;
+    // Pixels [lo, hi) have every tap inside the row.
+    let lo = r.min(w);
+    let hi = w.saturating_sub(k.len() - 1 - r).max(lo);
+    let pixel = |j: usize| {
+        let t_lo = r.saturating_sub(j);
+        let t_hi = k.len().min(w + r - j);
+        let mut acc = R::zero();
+        for t in t_lo..t_hi {
+            acc = acc + k[t] * xi[j + t - r];
         }
-        let src = &xi[j_lo + t - r..j_hi + t - r];
-        let dst = &mut o[j_lo..j_hi];
-        if t == 0 {
-            for (oj, &xj) in dst.iter_mut().zip(src) {
-                *oj = R::zero() + kt * xj;
-            }
-        } else {
-            for (oj, &xj) in dst.iter_mut().zip(src) {
-                *oj += kt * xj;
+        acc
+    };
+    for j in (0..lo).chain(hi..w) {
+        o[j] = pixel(j);
+    }
+    let mut j = lo;
+    while j + B <= hi {
+        let mut acc = [R::zero(); B];
+        for (t, &kt) in k.iter().enumerate() {
+            let src = &xi[j + t - r..][..B];
+            for l in 0..B {
+                acc[l] = acc[l] + kt * src[l];
             }
         }
+        o[j..j + B].copy_from_slice(&acc);
+        j += B;
+    }
+    for jj in j..hi {
+        o[jj] = pixel(jj);
     }
 }
 
-/// Output row `i` of [`correlate_cols`], written over `o`, from the whole input `x` of height
-/// `h`, whose rows start `stride` values apart (row `a` is `x[a * stride..a * stride + o.len()]`).
+/// Where row `a` of an image starts in a buffer: at `(a % held) * stride` (a whole image in
+/// rows `stride` apart: `held` is its height; a ring of the last `held` rows: slots `stride`
+/// apart).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct RowLayout {
+    pub stride: usize,
+    pub held: usize,
+}
+
+impl RowLayout {
+    #[inline(always)]
+    pub(super) fn start(self, a: usize) -> usize {
+        (a % self.held) * self.stride
+    }
+}
+
+/// Output row `i` of [`correlate_cols`], written over `o`, of the image of height `h` whose row
+/// `a` is `x[layout.start(a)..][..o.len()]`.
+///
+/// Per pixel: acc = 0 + k[t_lo] x[..] + k[t_lo + 1] x[..] + ..., the taps that reach inside the
+/// image in ascending order (the same taps for every pixel of the row; t_lo < t_hi as i < h).
 #[inline(always)]
-pub(super) fn col_kernel<R: Real>(
+pub(super) fn col_kernel<R: Real, const B: usize>(
     o: &mut [R],
     x: &[R],
-    stride: usize,
+    layout: RowLayout,
     h: usize,
     i: usize,
     k: &[R],
@@ -79,18 +117,37 @@ pub(super) fn col_kernel<R: Real>(
     let r = k.len() / 2;
     let t_lo = r.saturating_sub(i);
     let t_hi = k.len().min(h + r - i);
-    // Per pixel: acc = 0 + k[t_lo] x[..] + k[t_lo + 1] x[..] + ..., taps ascending; every pixel
-    // of the row has the same taps (t_lo < t_hi as i < h), the first writes `0 + k x`.
-    for (t, &kt) in k.iter().enumerate().take(t_hi).skip(t_lo) {
-        let a = (i + t - r) * stride;
-        let src = &x[a..a + w];
-        if t == t_lo {
-            for (oj, &xj) in o.iter_mut().zip(src) {
-                *oj = R::zero() + kt * xj;
-            }
+    // The slot of the first tap's row; the next taps' rows follow it, wrapping once at most
+    // (a ring holds at least as many rows as there are taps, an image all of them).
+    let first = (i + t_lo - r) % layout.held;
+    let start = |t: usize| {
+        let slot = first + (t - t_lo);
+        let slot = if slot >= layout.held {
+            slot - layout.held
         } else {
-            for (oj, &xj) in o.iter_mut().zip(src) {
-                *oj += kt * xj;
+            slot
+        };
+        slot * layout.stride
+    };
+    let mut j = 0;
+    while j + B <= w {
+        let mut acc = [R::zero(); B];
+        for (t, &kt) in k.iter().enumerate().take(t_hi).skip(t_lo) {
+            let src = &x[start(t) + j..][..B];
+            for l in 0..B {
+                acc[l] = acc[l] + kt * src[l];
+            }
+        }
+        o[j..j + B].copy_from_slice(&acc);
+        j += B;
+    }
+    if j < w {
+        let tail = &mut o[j..];
+        tail.fill(R::zero());
+        for (t, &kt) in k.iter().enumerate().take(t_hi).skip(t_lo) {
+            let src = &x[start(t) + j..][..tail.len()];
+            for (oj, &xj) in tail.iter_mut().zip(src) {
+                *oj = *oj + kt * xj;
             }
         }
     }
@@ -98,14 +155,14 @@ pub(super) fn col_kernel<R: Real>(
 
 crate::simd::wide_kernels! {
     unsafe fn [R: Real](o: &mut [R], xi: &[R], k: &[R]);
-    row_kernel_avx2 => { row_kernel(o, xi, k) }
-    row_kernel_avx512 => { row_kernel(o, xi, k) }
+    row_kernel_avx2 => { row_kernel::<R, BLOCK_AVX2>(o, xi, k) }
+    row_kernel_avx512 => { row_kernel::<R, BLOCK_AVX512>(o, xi, k) }
 }
 
 crate::simd::wide_kernels! {
-    unsafe fn [R: Real](o: &mut [R], x: &[R], stride: usize, h: usize, i: usize, k: &[R]);
-    col_kernel_avx2 => { col_kernel(o, x, stride, h, i, k) }
-    col_kernel_avx512 => { col_kernel(o, x, stride, h, i, k) }
+    unsafe fn [R: Real](o: &mut [R], x: &[R], layout: RowLayout, h: usize, i: usize, k: &[R]);
+    col_kernel_avx2 => { col_kernel::<R, BLOCK_AVX2>(o, x, layout, h, i, k) }
+    col_kernel_avx512 => { col_kernel::<R, BLOCK_AVX512>(o, x, layout, h, i, k) }
 }
 
 /// One row of a row correlation with `k` (zero padding): `o[j] = sum_t k[t] xi[j + t - r]`,
@@ -118,30 +175,7 @@ fn correlate_row<R: Real>(simd: Simd, o: &mut [R], xi: &[R], k: &[R]) {
         Simd::Avx512 => unsafe { row_kernel_avx512(o, xi, k) },
         #[cfg(target_arch = "x86_64")]
         Simd::Avx2 => unsafe { row_kernel_avx2(o, xi, k) },
-        _ => row_kernel(o, xi, k),
-    }
-}
-
-/// Output row `i` of a column correlation with `k` (zero padding) of the image of height `h`
-/// whose rows start `stride` values apart in `x`: `o[j] = sum_t k[t] x[(i + t - r) stride + j]`,
-/// taps ascending, written over `o`; `simd` must come from [`Simd::or_narrower`].
-#[inline]
-fn correlate_col<R: Real>(
-    simd: Simd,
-    o: &mut [R],
-    x: &[R],
-    stride: usize,
-    h: usize,
-    i: usize,
-    k: &[R],
-) {
-    match simd {
-        // SAFETY: the caller passes an instruction set from `or_narrower`, which the CPU supports.
-        #[cfg(target_arch = "x86_64")]
-        Simd::Avx512 => unsafe { col_kernel_avx512(o, x, stride, h, i, k) },
-        #[cfg(target_arch = "x86_64")]
-        Simd::Avx2 => unsafe { col_kernel_avx2(o, x, stride, h, i, k) },
-        _ => col_kernel(o, x, stride, h, i, k),
+        _ => row_kernel::<R, BLOCK_SCALAR>(o, xi, k),
     }
 }
 
@@ -171,10 +205,17 @@ fn correlate_cols<R: Real>(simd: Simd, x: &Image2d<R>, k: &[R]) -> Image2d<R> {
     }
     let simd = simd.or_narrower();
     let xd = &x.data;
-    out.data
-        .par_chunks_mut(w)
-        .enumerate()
-        .for_each(|(i, o)| correlate_col(simd, o, xd, w, h, i, k));
+    out.data.par_chunks_mut(w).enumerate().for_each(|(i, o)| {
+        let layout = RowLayout { stride: w, held: h };
+        match simd {
+            // SAFETY: `or_narrower` returns an instruction set the CPU supports.
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx512 => unsafe { col_kernel_avx512(o, xd, layout, h, i, k) },
+            #[cfg(target_arch = "x86_64")]
+            Simd::Avx2 => unsafe { col_kernel_avx2(o, xd, layout, h, i, k) },
+            _ => col_kernel::<R, BLOCK_SCALAR>(o, xd, layout, h, i, k),
+        }
+    });
     out
 }
 
