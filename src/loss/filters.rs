@@ -59,7 +59,7 @@ pub(super) fn row_kernel<R: Real, const B: usize>(o: &mut [R], xi: &[R], k: &[R]
         let t_hi = k.len().min(w + r - j);
         let mut acc = R::zero();
         for t in t_lo..t_hi {
-            acc = acc + k[t] * xi[j + t - r];
+            acc += k[t] * xi[j + t - r];
         }
         acc
     };
@@ -72,14 +72,14 @@ pub(super) fn row_kernel<R: Real, const B: usize>(o: &mut [R], xi: &[R], k: &[R]
         for (t, &kt) in k.iter().enumerate() {
             let src = &xi[j + t - r..][..B];
             for l in 0..B {
-                acc[l] = acc[l] + kt * src[l];
+                acc[l] += kt * src[l];
             }
         }
         o[j..j + B].copy_from_slice(&acc);
         j += B;
     }
-    for jj in j..hi {
-        o[jj] = pixel(jj);
+    for (jj, oj) in o.iter_mut().enumerate().take(hi).skip(j) {
+        *oj = pixel(jj);
     }
 }
 
@@ -135,7 +135,7 @@ pub(super) fn col_kernel<R: Real, const B: usize>(
         for (t, &kt) in k.iter().enumerate().take(t_hi).skip(t_lo) {
             let src = &x[start(t) + j..][..B];
             for l in 0..B {
-                acc[l] = acc[l] + kt * src[l];
+                acc[l] += kt * src[l];
             }
         }
         o[j..j + B].copy_from_slice(&acc);
@@ -147,7 +147,7 @@ pub(super) fn col_kernel<R: Real, const B: usize>(
         for (t, &kt) in k.iter().enumerate().take(t_hi).skip(t_lo) {
             let src = &x[start(t) + j..][..tail.len()];
             for (oj, &xj) in tail.iter_mut().zip(src) {
-                *oj = *oj + kt * xj;
+                *oj += kt * xj;
             }
         }
     }
