@@ -138,3 +138,58 @@ pub(crate) fn voxels_crossed<R: Real>(
         .map(|a| (voxel(tb, a) - voxel(ta, a)).unsigned_abs())
         .sum::<u64>()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::drr::grid::clip_line;
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// The benchmark's step count against a count of the boundary planes the chord crosses,
+    /// plane by plane (x = lo + k s for k = 1..n-1 strictly between the entry and exit
+    /// coordinates), on random rays through an anisotropic, off-centre, non-cubic grid.
+    #[test]
+    fn voxels_crossed_counts_the_boundary_planes_between_entry_and_exit() {
+        let data = [0.0f32; 0];
+        let (n, s, lo) = ([7usize, 4, 11], [1.5, 3.0, 0.7], [-4.0, 10.0, -2.5]);
+        let hi: [f64; 3] = std::array::from_fn(|a| lo[a] + n[a] as f64 * s[a]);
+        let grid = Grid {
+            data: &data,
+            n,
+            s,
+            lo,
+            hi,
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mut tested = 0;
+        for _ in 0..2000 {
+            let o: [f64; 3] = std::array::from_fn(|a| lo[a] - 20.0 + rng.random::<f64>() * 60.0);
+            let p: [f64; 3] =
+                std::array::from_fn(|a| lo[a] + rng.random::<f64>() * (hi[a] - lo[a]));
+            let d: [f64; 3] = std::array::from_fn(|a| p[a] - o[a]);
+            let (t_in, t_out) = clip_line(o, d, lo, hi);
+            if !(t_in < t_out) {
+                continue;
+            }
+            let mut planes = 0u64;
+            for a in 0..3 {
+                let (ca, cb) = (o[a] + t_in * d[a], o[a] + t_out * d[a]);
+                let (c0, c1) = (ca.min(cb), ca.max(cb));
+                planes += (1..n[a])
+                    .filter(|&k| {
+                        let x = lo[a] + k as f64 * s[a];
+                        c0 < x && x < c1
+                    })
+                    .count() as u64;
+            }
+            assert_eq!(
+                voxels_crossed(&grid, o, d, t_in, t_out),
+                1 + planes,
+                "o {o:?} d {d:?}"
+            );
+            tested += 1;
+        }
+        assert!(tested > 1500, "{tested} rays crossed the grid");
+    }
+}

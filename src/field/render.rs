@@ -156,6 +156,50 @@ pub fn line_integral_vjp<R: Real>(g_acc: R, delta: &[R], g_mu: &mut [R]) {
 mod tests {
     use super::*;
 
+    /// NAF's constant near / far hold every point of an off-centre volume at every angle: the
+    /// distance from the source (at DSO (cos a, sin a, 0)) to each corner of the box lies in
+    /// [near, far], and the farthest and nearest corners come within the 5 mm margin of them.
+    #[test]
+    fn near_far_hold_every_corner_of_an_off_centre_volume_at_every_angle() {
+        for off in [[-30.0, -20.0, 4.0], [25.0, 35.0, -3.0]] {
+            let geo = ConeBeam {
+                off_origin: off,
+                ..ConeBeam::centred([4, 4], [1.0, 1.0], [40, 20, 10], [1.0, 2.0, 3.0])
+            };
+            let (near, far) = near_far(&geo);
+            let (near, far) = (near * MM, far * MM);
+            let s = geo.volume_size();
+            let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+            for step in 0..3600 {
+                let a = step as f64 * std::f64::consts::TAU / 3600.0;
+                let src = [geo.dso * a.cos(), geo.dso * a.sin(), 0.0];
+                for corner in 0..8 {
+                    let p: [f64; 3] = std::array::from_fn(|k| {
+                        let sign = if corner >> k & 1 == 1 { 0.5 } else { -0.5 };
+                        off[k] + sign * s[k]
+                    });
+                    // The in-plane distance: NAF's bound ignores z (rays leave the plane by
+                    // the cone angle only).
+                    let d = ((p[0] - src[0]).powi(2) + (p[1] - src[1]).powi(2)).sqrt();
+                    lo = lo.min(d);
+                    hi = hi.max(d);
+                }
+            }
+            assert!(
+                near <= lo && hi <= far,
+                "{off:?}: [{lo}, {hi}] outside [{near}, {far}]"
+            );
+            assert!(
+                lo - near <= 5.0 + 1e-3,
+                "{off:?}: near {near} vs nearest {lo}"
+            );
+            assert!(
+                far - hi <= 5.0 + 1e-3,
+                "{off:?}: far {far} vs farthest {hi}"
+            );
+        }
+    }
+
     /// Each pixel's ray, followed for DSD, reaches that pixel's centre on the detector, placed
     /// from the convention alone (NAF / X-Gaussian pose: source at DSO (cos a, sin a, 0),
     /// detector axes u = (-sin a, cos a, 0), v = (0, 0, -1), the detector DSD from the source
