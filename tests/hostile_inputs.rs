@@ -354,8 +354,8 @@ fn geometry_accuracy_and_threads_are_range_checked() {
 }
 
 /// Numeric flags that would allocate without bound or never end: view counts and the
-/// projection bytes of `data`, `drr` angle counts at a large detector, `bench` cases (render
-/// and train), the
+/// projection bytes of `data`, `drr` angle counts at a large detector, `bench` cases (render,
+/// train and loss), the
 /// iterations of a field baseline, `reproduce --jobs`. Each is refused with its allowed range.
 #[test]
 fn unbounded_numeric_flags_are_range_checked() {
@@ -430,6 +430,16 @@ fn unbounded_numeric_flags_are_range_checked() {
             &["bench", "train", "--sizes", "64", "--views", "0"][..],
             "--views",
             "[1, 100]",
+        ),
+        (
+            &["bench", "loss", "--sizes", "64,100000"][..],
+            "--sizes",
+            "[8, 4096]",
+        ),
+        (
+            &["bench", "loss", "--sizes", "64", "--reps", "0"][..],
+            "--reps",
+            "[1, 1000]",
         ),
         (
             &["reproduce", "quick", "--jobs", "100000"][..],

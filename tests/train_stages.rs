@@ -132,3 +132,29 @@ fn bench_train_prints_the_stages_on_a_dataset_folder_and_the_phantom() {
     );
     assert!(out.contains("16x16"), "{out}");
 }
+
+/// `bench loss` prints, per size, the fused SSIM, its definition (the run fails if the two
+/// differ in a bit), their ratio and the whole loss.
+#[test]
+fn bench_loss_prints_the_fused_kernels_against_the_definition() {
+    let out = cli::ok(&["bench", "loss", "--sizes", "16,37", "--reps", "2"]);
+    for w in [
+        "ssim fused",
+        "ssim definition",
+        "ratio (CPU)",
+        "whole loss",
+        "median of 2",
+    ] {
+        assert!(out.contains(w), "missing `{w}`:\n{out}");
+    }
+    let rows: Vec<&str> = out
+        .lines()
+        .filter(|l| l.trim_start().starts_with("16 ") || l.trim_start().starts_with("37 "))
+        .collect();
+    assert_eq!(rows.len(), 2, "{out}");
+    for r in rows {
+        let ratio = r.split_whitespace().find(|f| f.ends_with('x')).unwrap();
+        let v: f64 = ratio.trim_end_matches('x').parse().unwrap();
+        assert!(v.is_finite() && v > 0.0, "{r}");
+    }
+}

@@ -39,22 +39,24 @@ fn timed<T>(f: impl FnOnce() -> T) -> (T, (f64, f64)) {
     (v, (t0.elapsed().as_secs_f64() * 1e3, cpu * 1e3))
 }
 
-/// Time the loss at `size`^2 over `reps` rounds; an error if a case is out of range or the
+/// Check a case of the loss benchmark; the error names the flag, the value and the allowed
+/// range.
+pub fn check_loss_case(size: usize, reps: usize) -> Result<()> {
+    for (flag, v, (lo, hi)) in [("--sizes", size, LOSS_SIZES), ("--reps", reps, LOSS_REPS)] {
+        if !(lo..=hi).contains(&v) {
+            return Err(Error::invalid(
+                flag,
+                format!("{v} is outside the allowed range [{lo}, {hi}]"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Time the loss at `size`^2 over `reps` rounds; an error if the case is out of range or the
 /// fused kernels and the definition disagree in any bit.
 pub fn time_loss(size: usize, reps: usize) -> Result<LossTiming> {
-    let in_range = |v: usize, (lo, hi): (usize, usize)| (lo..=hi).contains(&v);
-    if !in_range(size, LOSS_SIZES) {
-        return Err(Error::invalid(
-            "--sizes",
-            format!("{size} is outside the allowed range {LOSS_SIZES:?}"),
-        ));
-    }
-    if !in_range(reps, LOSS_REPS) {
-        return Err(Error::invalid(
-            "--reps",
-            format!("{reps} is outside the allowed range {LOSS_REPS:?}"),
-        ));
-    }
+    check_loss_case(size, reps)?;
     let mut rng = ChaCha8Rng::seed_from_u64(size as u64);
     let n = size * size;
     let gt: Vec<f32> = (0..n).map(|_| rng.random::<f32>()).collect();

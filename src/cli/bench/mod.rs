@@ -417,12 +417,15 @@ fn run_drr(args: &BenchArgs) -> anyhow::Result<()> {
 }
 
 fn run_loss(args: &BenchArgs) -> anyhow::Result<()> {
-    use unispine::bench::loss::time_loss;
+    use unispine::bench::loss::{check_loss_case, time_loss};
     let sizes = if args.sizes.is_empty() {
         vec![256, 1024]
     } else {
         args.sizes.clone()
     };
+    for &size in &sizes {
+        check_loss_case(size, args.reps)?;
+    }
     println!(
         "loss stage, f32, {} threads, {} path, median of {} reps (wall ms / process CPU ms)",
         rayon::current_num_threads(),
