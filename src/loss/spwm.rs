@@ -17,6 +17,8 @@
 //! [`weights`] forms w = 1 + alpha r(t) P per iteration (one multiply-add per pixel). No gradient
 //! flows through w (the code detaches it). `t` is the 1-based iteration of the code's loop.
 
+use rayon::prelude::*;
+
 use crate::image2d::Image2d;
 use crate::real::Real;
 
@@ -263,7 +265,7 @@ pub fn weights<R: Real>(prior: &Image2d<R>, iter: usize, cfg: &SpwmConfig) -> Im
     Image2d::from_vec(
         prior.width,
         prior.height,
-        prior.data.iter().map(|&p| R::one() + a * p).collect(),
+        prior.data.par_iter().map(|&p| R::one() + a * p).collect(),
     )
 }
 
