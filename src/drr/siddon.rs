@@ -169,7 +169,7 @@ mod tests {
                 std::array::from_fn(|a| lo[a] + rng.random::<f64>() * (hi[a] - lo[a]));
             let d: [f64; 3] = std::array::from_fn(|a| p[a] - o[a]);
             let (t_in, t_out) = clip_line(o, d, lo, hi);
-            if !(t_in < t_out) {
+            if t_in >= t_out || t_in.is_nan() || t_out.is_nan() {
                 continue;
             }
             let mut planes = 0u64;

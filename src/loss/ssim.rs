@@ -25,7 +25,7 @@
 //! vertically and forms S and the three partials in the same row; the backward correlates the
 //! partials vertically and then horizontally a row at a time and adds the three terms. Every
 //! pixel sums the same products in the same order as the five whole-image blurs of
-//! [`reference`] (the definition, kept as the oracle), so the bits are the same, on every SIMD
+//! [`reference`](mod@reference) (the definition, kept as the oracle), so the bits are the same, on every SIMD
 //! path and thread count, with nine image-sized buffers fewer and a third of the passes.
 
 use rayon::prelude::*;
