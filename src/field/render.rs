@@ -156,6 +156,27 @@ pub fn line_integral_vjp<R: Real>(g_acc: R, delta: &[R], g_mu: &mut [R]) {
 mod tests {
     use super::*;
 
+    /// Every (seed, purpose, a, b) has a stream of its own (b < 2^32, as a ray index is): the
+    /// first draws of a grid of them are all distinct.
+    #[test]
+    fn ray_streams_differ_for_every_seed_purpose_and_pair() {
+        let mut seen = std::collections::HashSet::new();
+        for seed in 0..6u64 {
+            for purpose in 0..4u64 {
+                for a in [0u64, 1, 2, 7, 1 << 20] {
+                    for b in [0u64, 1, 2, 3, 1 << 31] {
+                        let mut r = ray_rng(seed, purpose, a, b);
+                        let first = (r.random::<u64>(), r.random::<u64>());
+                        assert!(
+                            seen.insert(first),
+                            "{seed} {purpose} {a} {b} repeats a stream"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
     /// NAF's constant near / far hold every point of an off-centre volume at every angle: the
     /// distance from the source (at DSO (cos a, sin a, 0)) to each corner of the box lies in
     /// [near, far], and the farthest and nearest corners come within the 5 mm margin of them.

@@ -512,6 +512,14 @@ mod tests {
     }
 
     #[test]
+    #[should_panic(expected = "SSIM of images of different or empty size: 5x4 vs 4x5")]
+    fn images_of_different_sizes_are_refused() {
+        let (x, _) = pair(5, 4, 1);
+        let (y, _) = pair(4, 5, 2);
+        ssim_forward_backward(&x, &y);
+    }
+
+    #[test]
     fn fused_kernels_are_thread_count_invariant() {
         let (x, y) = pair(131, 70, 9);
         let (x, y): (Image2d<f32>, Image2d<f32>) = (x.cast(), y.cast());
