@@ -52,8 +52,9 @@ use unispine::render::composite;
 pub struct BenchArgs {
     /// What to benchmark: `render` (rasterizer forward and forward + backward), `field`
     /// (neural-field baselines: MLP products, per-iteration stages, memory), `train` (one
-    /// training iteration of the `unispine` preset split into stages) or `drr` (the DRR
-    /// projectors per view and SIMD path).
+    /// training iteration of the `unispine` preset split into stages), `drr` (the DRR
+    /// projectors per view and SIMD path) or `loss` (SSIM's fused kernels against its
+    /// definition, and the whole loss of Eq. 8).
     pub kind: String,
     /// Gaussian counts (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "10000,50000,100000")]
