@@ -8,12 +8,12 @@
 //! process; the ratios are formed by the caller from figures of the same run.
 
 use std::sync::Mutex;
-use std::time::Instant;
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
+use super::timed;
 use crate::bench::render::bench_geometry;
 use crate::error::Result;
 use crate::field::mlp::Cache;
@@ -22,17 +22,6 @@ use crate::field::train::{Sampling, StageTimes, Workspace, RAYS_PER_BLOCK};
 use crate::field::{Field, FieldConfig};
 use crate::optim::FlatAdam;
 use crate::simd::Simd;
-use crate::timer::cpu_seconds;
-
-/// Wall and process CPU seconds of `f`.
-pub fn timed<T>(f: impl FnOnce() -> T) -> (T, f64, f64) {
-    let c0 = cpu_seconds(libc::CLOCK_PROCESS_CPUTIME_ID);
-    let t0 = Instant::now();
-    let v = f();
-    let wall = t0.elapsed().as_secs_f64();
-    let cpu = cpu_seconds(libc::CLOCK_PROCESS_CPUTIME_ID) - c0;
-    (v, wall, cpu)
-}
 
 /// The peak of [`crate::simd::peak_run`] on `threads` threads: `(flops, wall s, cpu s)`.
 pub fn peak(simd: Simd, threads: usize, iters: u64) -> (f64, f64, f64) {

@@ -4,16 +4,13 @@
 //! whole-image blurs), in f32 on one square image pair, the two taking turns so that a drift of
 //! the machine's speed affects both alike. Every round checks that both give the same bits.
 
-use std::time::Instant;
-
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::median;
+use super::{median, timed};
 use crate::error::{Error, Result};
 use crate::image2d::Image2d;
 use crate::loss::{self, ssim, LossConfig};
-use crate::timer::cpu_seconds;
 
 /// Allowed square image sides and repetitions.
 pub const LOSS_SIZES: (usize, usize) = (8, 4096);
@@ -32,11 +29,10 @@ pub struct LossTiming {
     pub loss: (f64, f64),
 }
 
-fn timed<T>(f: impl FnOnce() -> T) -> (T, (f64, f64)) {
-    let (c0, t0) = (cpu_seconds(libc::CLOCK_PROCESS_CPUTIME_ID), Instant::now());
-    let v = f();
-    let cpu = cpu_seconds(libc::CLOCK_PROCESS_CPUTIME_ID) - c0;
-    (v, (t0.elapsed().as_secs_f64() * 1e3, cpu * 1e3))
+/// `f`'s value and its (wall, process CPU) milliseconds.
+fn timed_ms<T>(f: impl FnOnce() -> T) -> (T, (f64, f64)) {
+    let (v, wall, cpu) = timed(f);
+    (v, (wall * 1e3, cpu * 1e3))
 }
 
 /// Check a case of the loss benchmark; the error names the flag, the value and the allowed
@@ -67,8 +63,8 @@ pub fn time_loss(size: usize, reps: usize) -> Result<LossTiming> {
     let cfg = LossConfig::weighted_charbonnier_dssim();
     let (mut fused, mut refer, mut whole) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..reps {
-        let (a, ta) = timed(|| ssim::ssim_forward_backward(&render, &gt));
-        let (b, tb) = timed(|| ssim::reference::ssim_forward_backward(&render, &gt));
+        let (a, ta) = timed_ms(|| ssim::ssim_forward_backward(&render, &gt));
+        let (b, tb) = timed_ms(|| ssim::reference::ssim_forward_backward(&render, &gt));
         let same = a.0.to_bits() == b.0.to_bits()
             && a.1
                 .data
@@ -81,7 +77,7 @@ pub fn time_loss(size: usize, reps: usize) -> Result<LossTiming> {
                 format!("the fused kernels and the definition disagree at {size}^2"),
             ));
         }
-        let (_, tl) = timed(|| loss::forward_backward(&render, &gt, Some(&weights), &cfg));
+        let (_, tl) = timed_ms(|| loss::forward_backward(&render, &gt, Some(&weights), &cfg));
         fused.push(ta);
         refer.push(tb);
         whole.push(tl);

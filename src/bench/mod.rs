@@ -27,3 +27,13 @@ pub(crate) fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
 }
+
+/// `f`'s value, and its wall and process CPU seconds (all threads).
+pub fn timed<T>(f: impl FnOnce() -> T) -> (T, f64, f64) {
+    let c0 = crate::timer::cpu_seconds(libc::CLOCK_PROCESS_CPUTIME_ID);
+    let t0 = std::time::Instant::now();
+    let v = f();
+    let wall = t0.elapsed().as_secs_f64();
+    let cpu = crate::timer::cpu_seconds(libc::CLOCK_PROCESS_CPUTIME_ID) - c0;
+    (v, wall, cpu)
+}
