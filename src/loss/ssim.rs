@@ -20,13 +20,15 @@
 //! The maps are computed in the precision `R` (as upstream computes them in f32); the mean is a
 //! deterministic f64 reduction ([`crate::par`]).
 //!
-//! The kernels here are fused: one pass over the rows correlates x, y and the three products
-//! (formed a row at a time) horizontally; one pass over the output rows correlates those five
-//! vertically and forms S and the three partials in the same row; the backward correlates the
-//! partials vertically and then horizontally a row at a time and adds the three terms. Every
-//! pixel sums the same products in the same order as the five whole-image blurs of
-//! [`reference`](mod@reference) (the definition, kept as the oracle), so the bits are the same, on every SIMD
-//! path and thread count, with nine image-sized buffers fewer and a third of the passes.
+//! The kernels here are fused and work in bands of output rows: a row of x, y and the three
+//! products (formed a row at a time) is correlated along the row into a ring of the window's
+//! rows; each output row correlates those five down the columns and forms S and the three
+//! partials, kept in a second ring; each gradient row correlates the partials down the columns
+//! and then along the row and adds the three terms. Only S (for the mean) and the gradient are
+//! image-sized (the definition writes 24 image-sized buffers). Every pixel sums the same
+//! products in the same order as the five whole-image blurs of [`reference`](mod@reference)
+//! (the definition, kept as the oracle), so the bits are the same on every SIMD path, band
+//! height and thread count.
 
 use rayon::prelude::*;
 
