@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A single-node Slurm cluster on this machine, for the Slurm test of `unispine reproduce`
-# (tests/slurm.rs) and for trying --emit-slurm locally. Debian, root, no systemd needed.
+# (tests/reproduce/slurm.rs) and for trying --emit-slurm locally. Debian, root, no systemd needed.
 #
 #   bash scripts/slurm-local.sh start    # install (apt) if needed, configure, start munge + Slurm
 #   bash scripts/slurm-local.sh stop     # stop what `start` started (by the pids it recorded)

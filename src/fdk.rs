@@ -15,7 +15,7 @@
 //!    (always, for the square detectors TIGRE's padding supports) no product of the circular
 //!    convolution wraps, so that filtering is exactly the direct convolution
 //!    `q[j] = sum_i 2 h[j - i] p[i]` over the row, which is what [`filter_row`] computes
-//!    (tested against the padded DFT route in `tests/fdk.rs`);
+//!    (tested against the padded DFT route in `tests/fdk/closed_forms.rs`);
 //! 3. scale by `(DSD / DSO) (2 pi / N) / (4 du)` with `N` the number of views (TIGRE's
 //!    `scale_factor`, `du = dDetector[1]`);
 //! 4. backprojection: every voxel centre is projected onto each view's detector, the filtered

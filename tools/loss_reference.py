@@ -33,7 +33,7 @@ FOLDERS = ["eq06-spwm-prior", "eq07-spwm-weights", "eq08-hybrid-loss", "eq09-wei
 
 # The paper / code constants, written here from their upstream sources (not from the Rust code),
 # so that a changed Rust default fails the golden tests: the cases in PINNED must carry exactly
-# these values in their inputs, and tests/golden_losses.rs checks that the Rust defaults
+# these values in their inputs, and tests/loss/golden.rs checks that the Rust defaults
 # serialise to those inputs.
 # SPWM: UniSpine-GS (github.com/orangeisland66/UniSpine-GS) config/example.yaml (attn_alpha,
 # attn_hf_lambda, attn_blur_kernel, attn_blur_sigma, attn_adaptive_gate, attn_gate_quantile,

@@ -14,7 +14,7 @@
 //! Steps: 1e-5 for parameters (the grid encoders are linear in their parameters, the MLP is
 //! smooth away from LeakyReLU's kink), 1e-6 m for points. The points keep at least
 //! [`CELL_MARGIN`] of a cell away from every cell face of every grid (asserted by
-//! [`cell_margin`] in `tests/field_encoders.rs`), so no stencil crosses a face.
+//! [`cell_margin`] in `tests/field/encoders.rs`), so no stencil crosses a face.
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -149,7 +149,7 @@ pub fn groups(e: &Encoder) -> Vec<(&'static str, std::ops::Range<usize>)> {
         Encoder::HashGrid(h) => vec![("table", 0..h.n_params())],
         Encoder::DenseGrid(d) => vec![("table", 0..d.n_params())],
         // Upstream's line parameters are never read: no group to check (their gradient is
-        // exactly zero, `tests/field_encoders.rs`).
+        // exactly zero, `tests/field/encoders.rs`).
         Encoder::TensorVm(v) if v.lines == VmLines::Upstream => {
             let (l, b) = v.offsets();
             vec![("planes", 0..l), ("basis", b..v.n_params())]

@@ -5,12 +5,12 @@
 //!
 //! The scenes are small (32 x 24 detector, 3-8 Gaussians) and chosen away from every hard
 //! cutoff of the rasterizer, where the function is not differentiable: [`margins`] measures the
-//! distance to each cutoff and `tests/gradcheck.rs` asserts it. Every Gaussian's 3-sigma square
+//! distance to each cutoff and `tests/render/gradcheck.rs` asserts it. Every Gaussian's 3-sigma square
 //! covers the image with 2 px to spare (so its tile rectangle cannot change under a
 //! perturbation), o G stays inside (1/255, 0.99) at every pixel, and the final transmittance
 //! stays far above 1e-4.
 //!
-//! `unispine gradcheck` prints these rows; `tests/gradcheck.rs` asserts them.
+//! `unispine gradcheck` prints these rows; `tests/render/gradcheck.rs` asserts them.
 
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -7,7 +7,7 @@
 //! ([`super::padded_lanes`], the trilinear march's zero-padded samples on 4 or 8 lanes of f64
 //! positions, is written in AVX2 and AVX-512 directly). Every lane performs
 //! the IEEE operations of the per-ray loop in the same order (no fused multiply-add anywhere),
-//! so every path gives the same bits (`tests/drr_simd.rs` compares them).
+//! so every path gives the same bits (`tests/drr/simd.rs` compares them).
 //!
 //! Longer than 600 lines because the trait and its three implementations (AVX2, AVX2 with
 //! AVX-512VL's conversions, AVX-512) are read side by side: an operation's semantics must match

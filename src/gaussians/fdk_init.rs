@@ -21,7 +21,7 @@
 //!   0.05 is absolute on a [0, 1] volume, the same rule when the maximum is 1). The default is
 //!   0.10, not 0.05: R2-Gaussian scans 360 degree orbits, the paper's protocol 180 degrees, and
 //!   TIGRE's FDK of a 180 degree scan (no Parker weights) has streaks above 5 % of the
-//!   maximum. On a one-ball phantom (24^3 voxels, 40 views, `tests/init_rules.rs`) 48 of the
+//!   maximum. On a one-ball phantom (24^3 voxels, 40 views, `tests/gaussians/init_rules.rs`) 48 of the
 //!   1239 candidates at 0.05 lie more than 2 voxels outside the ball, none past 1 voxel at
 //!   0.10, and the ball's 912 voxel centres are all kept at both;
 //! - `init.points` (100,000, as the `unit-cube` rule, so the two differ only in where the

@@ -4,5 +4,6 @@
 
 pub mod cli;
 pub mod golden;
+pub mod hostile;
 pub mod skip;
 pub mod tiny;

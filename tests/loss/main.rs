@@ -1,0 +1,7 @@
+//! The losses (`src/loss/`, Eqs. 6-9 and SSIM): finite differences and golden files.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod golden;
+mod gradcheck;

@@ -1,0 +1,6 @@
+//! Adam (`src/optim/`) against a hand computation.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod adam;

@@ -1,0 +1,6 @@
+//! `unispine report` (`src/report/`).
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod cli;
