@@ -322,7 +322,87 @@ pub fn missing(rows: &[Row]) -> Vec<&Row> {
 
 #[cfg(test)]
 mod tests {
-    use super::method_label;
+    use super::{gather, method_label};
+    use crate::reproduce::plan::{Plan, TrainSchema};
+    use std::path::Path;
+
+    /// A run folder written here from the documented files (`cell.json`, `metrics.json`).
+    fn write_cell(dir: &Path, status: &str, completed: bool, psnr: f64) {
+        std::fs::create_dir_all(dir).unwrap();
+        let cell = format!(
+            r#"{{"key": "k", "status": "{status}", "args": [], "dataset_checksum": "c0ffee",
+                "wall_s": 2.5, "error": null, "threads": 3, "machine": {{"cpu_model": "cpu",
+                "cores": 4, "simd": "avx2", "version": "0.1.0", "git_commit": "abc"}}}}"#
+        );
+        std::fs::write(dir.join("cell.json"), cell).unwrap();
+        let metrics = format!(
+            r#"{{"completed": {completed}, "test_psnr": {psnr}, "test_ssim": 0.75,
+                "train_time_s": 12.0, "render_fps": 40.0, "n_gaussians": 7,
+                "peak_memory_bytes": 3145728, "evals": [{{"iteration": 5, "psnr": 20.0}}]}}"#
+        );
+        std::fs::write(dir.join("metrics.json"), metrics).unwrap();
+    }
+
+    /// Each row reads its own cell's folder, names its dataset's paper dataset, and keeps the
+    /// figures only of a run that both the record (`done`) and the metrics (`completed`) call
+    /// finished; provenance and peak memory are kept for every run that has them.
+    #[test]
+    fn gather_keeps_the_figures_of_finished_runs_only() {
+        let tmp = tempfile::tempdir().unwrap();
+        let text = "name = \"t\"\niters = 10\nseeds = [0, 1]\nmethods = [\"unispine\"]\n\
+                    [[datasets]]\nname = \"a\"\npaper = \"CTSpine3D\"\n\
+                    data = [\"phantom\", \"--size\", \"16\"]\n\
+                    [[datasets]]\nname = \"b\"\npaper = \"FeSpine3D\"\n\
+                    data = [\"phantom\", \"--size\", \"16\"]\n";
+        let plan = Plan::parse(
+            text,
+            Path::new("p.toml"),
+            tmp.path(),
+            &TrainSchema::of_train(),
+        )
+        .unwrap();
+        let out = tmp.path();
+        let run = |d: &str, s: u64| out.join(format!("runs/{d}/unispine/seed{s}"));
+        write_cell(&run("a", 0), "done", true, 30.5);
+        write_cell(&run("a", 1), "stopped", true, 31.5);
+        write_cell(&run("b", 0), "done", false, 32.5);
+        let rows = gather(&plan, out);
+        let got: Vec<_> = rows
+            .iter()
+            .map(|r| {
+                (
+                    r.dataset.as_str(),
+                    r.seed,
+                    r.paper_dataset.as_deref(),
+                    r.status.as_str(),
+                    r.psnr,
+                )
+            })
+            .collect();
+        assert_eq!(
+            got,
+            [
+                ("a", 0, Some("CTSpine3D"), "done", Some(30.5)),
+                ("a", 1, Some("CTSpine3D"), "stopped", None),
+                ("b", 0, Some("FeSpine3D"), "done", None),
+                ("b", 1, Some("FeSpine3D"), "missing", None),
+            ]
+        );
+        let r = &rows[0];
+        assert_eq!(
+            (r.ssim, r.train_time_s, r.fps, r.n_gaussians, r.wall_s),
+            (Some(0.75), Some(12.0), Some(40.0), Some(7), Some(2.5))
+        );
+        assert_eq!(r.curve, [(5, 20.0)]);
+        for r in &rows[..3] {
+            assert_eq!(r.peak_memory_mib, Some(3.0));
+            assert_eq!(r.threads, Some(3));
+            assert_eq!(r.cores, Some(4));
+            assert_eq!(r.dataset_checksum.as_deref(), Some("c0ffee"));
+        }
+        assert_eq!(rows[1].wall_s, None);
+        assert_eq!(rows[3].peak_memory_mib, None);
+    }
 
     #[test]
     fn reduced_field_presets_are_labelled_as_reduced() {
