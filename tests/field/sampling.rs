@@ -1,6 +1,7 @@
 //! Field rays (NAF / SAX-NeRF sampling) against the documented convention: stratified depths
 //! (bins from a closed form, jitter replayed from the same seeded stream), sample points,
-//! `delta` and the line integral of a constant field, NAF's constant near / far.
+//! `delta` and the line integral of a constant field, NAF's constant near / far, and the
+//! trainer's batch loss from those per-ray functions.
 
 use rand::RngExt;
 use unispine::field::render as fr;
@@ -116,4 +117,57 @@ fn near_far_is_naf_s_constant_interval() {
     let (near, far) = fr::near_far(&g);
     assert!((near - (g.dso - dmax - 5.0) / 1000.0).abs() < 1e-15);
     assert!((far - (g.dso + dmax + 5.0) / 1000.0).abs() < 1e-15);
+}
+
+/// The trainer's batch loss is the mean over the rays of (line integral - target)^2, where ray
+/// k of the batch is sampled from the jitter stream `jitter(k)` into samples of its own: each
+/// integral is written here from the per-ray functions checked above, over several blocks of
+/// rays (the last one partial), so a sample stored in another ray's place or another ray's
+/// stream shows. `render_rays` is held to the same integrals.
+#[test]
+fn the_batch_loss_samples_ray_k_from_stream_k() {
+    use unispine::field::train::{loss_and_grad, render_rays, Sampling, RAYS_PER_BLOCK};
+    use unispine::field::{Field, FieldConfig};
+    let mut cfg = FieldConfig::preset("naf", 10).unwrap();
+    cfg.hidden_dim = 8;
+    cfg.num_layers = 3;
+    cfg.skips = vec![];
+    cfg.n_samples = 5;
+    let field = Field::<f64>::new(&cfg).unwrap();
+    let n_rays = 2 * RAYS_PER_BLOCK + 3;
+    let rays: Vec<fr::Ray> = (0..n_rays)
+        .map(|i| fr::Ray {
+            o: [1.0, 0.0, 0.0],
+            d: [-1.0, -0.2 + 0.02 * i as f64, 0.01 * i as f64 - 0.1],
+        })
+        .collect();
+    let targets: Vec<f64> = (0..n_rays).map(|i| 0.01 * i as f64).collect();
+    let jitter = |i: usize| fr::ray_rng(5, 2, 0, i as u64);
+    let (near, far, bound) = (0.6, 1.4, 0.3);
+    let sampling = Sampling::new((near, far), cfg.n_samples, bound, &jitter);
+    let mut want_loss = 0.0;
+    let mut want = Vec::new();
+    for (k, ray) in rays.iter().enumerate() {
+        let t = fr::stratified(near, far, cfg.n_samples, &mut jitter(k));
+        let (mut pts, mut delta) = (Vec::new(), Vec::new());
+        fr::samples(ray, &t, bound, &mut pts, &mut delta);
+        let mu = field.density(&pts);
+        let acc: f64 = mu.iter().zip(&delta).map(|(m, d)| m * d).sum();
+        want.push(acc);
+        want_loss += (acc - targets[k]).powi(2);
+    }
+    want_loss /= n_rays as f64;
+    assert!(
+        want.iter().all(|&a| a > 1e-3),
+        "integrals too small to see: {want:?}"
+    );
+    let (loss, _) = loss_and_grad(&field, &rays, &targets, &sampling);
+    assert!(
+        (loss - want_loss).abs() <= 1e-12 * want_loss,
+        "loss {loss} against {want_loss}"
+    );
+    let got = render_rays(&field, &rays, &sampling);
+    for (k, (g, w)) in got.iter().zip(&want).enumerate() {
+        assert!((g - w).abs() <= 1e-12 * w, "ray {k}: {g} against {w}");
+    }
 }
