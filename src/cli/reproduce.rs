@@ -104,14 +104,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
         only: task.map(|t| vec![t]),
     };
     if args.emit_slurm {
-        let mut on_event = |e: &RunEvent| {
-            if let RunEvent::DatasetBuilding { name } = e {
-                eprintln!("dataset {name}: building");
-            } else if let RunEvent::DatasetSkipped { name, reason } = e {
-                eprintln!("dataset {name}: skipped (optional): {reason}");
-            }
-        };
-        let submit = command::emit_slurm(&plan, plan_arg, &opts, &mut on_event)?;
+        let submit = command::emit_slurm(&plan, plan_arg, &opts, &mut print_event)?;
         println!(
             "{} cells as a Slurm job array ({} cpus, {} per task); submit with: sh {}",
             cells.len(),
@@ -140,42 +133,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
             args.jobs,
             out.display()
         );
-        let mut on_event = |e: &RunEvent| match e {
-            RunEvent::DatasetBuilding { name } => eprintln!("dataset {name}: building"),
-            RunEvent::DatasetSkipped { name, reason } => {
-                eprintln!("dataset {name}: skipped (optional): {reason}")
-            }
-            RunEvent::DatasetFailed { name, error } => {
-                eprintln!("dataset {name}: FAILED, its cells fail: {error}")
-            }
-            RunEvent::CellStarted { k, n, label } => eprintln!("[cell {k}/{n}] {label}: training"),
-            RunEvent::CellEnded {
-                k,
-                n,
-                label,
-                outcome,
-                elapsed_s,
-                eta_s,
-            } => {
-                let what = match outcome {
-                    Outcome::Kept => "finished earlier, kept".to_string(),
-                    Outcome::Done { wall_s, resumed } => format!(
-                        "{} in {}",
-                        if *resumed { "resumed, done" } else { "done" },
-                        fmt_s(*wall_s)
-                    ),
-                    Outcome::Failed { error } => format!("FAILED: {error}"),
-                };
-                let left = eta_s
-                    .map(|s| format!(", about {} left", fmt_s(s)))
-                    .unwrap_or_default();
-                eprintln!(
-                    "[cell {k}/{n}] {label}: {what} (elapsed {}{left})",
-                    fmt_s(*elapsed_s)
-                );
-            }
-        };
-        let sum = run::run_plan(&plan, &opts, &mut on_event)?;
+        let sum = run::run_plan(&plan, &opts, &mut print_event)?;
         failed_now = sum.failed;
         if task.is_some() {
             if sum.failed > 0 {
@@ -207,37 +165,7 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
         doc: tables,
     } = command::write_tables(&plan, &out, &schema.method_help, &extra, doc)
         .context("writing the tables")?;
-    // Print the tables and verdicts (everything before the method descriptions).
-    let head = unispine::reproduce::tables::results_part(&tables).to_markdown();
-    println!("{}", head.trim_end());
-    println!();
-    for v in &verdicts {
-        println!("verdict: {:<15} {}", v.word.as_str(), v.claim.text);
-    }
-    for m in unispine::reproduce::magnitude::scoped(&plan, &rows) {
-        println!(
-            "magnitude: [{}] {}: {}",
-            m.scope,
-            m.verdict.claim.text,
-            m.reading()
-        );
-    }
-    if let Some(doc) = &args.claims_doc {
-        println!("claims document: {}", doc.display());
-    }
-    let missing = aggregate::missing(&rows);
-    if !missing.is_empty() {
-        println!(
-            "\n{} of {} cells have no result: {}",
-            missing.len(),
-            rows.len(),
-            missing
-                .iter()
-                .map(|r| format!("{} ({})", r.run_dir, r.status))
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-    }
+    print_results(&plan, &rows, &verdicts, &tables, args.claims_doc.as_deref());
     let charts = unispine::report::reproduce::write_report(
         &rows,
         &out,
@@ -265,4 +193,84 @@ pub fn run(args: ReproduceArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Progress of a plan's run on stderr, one line per event.
+fn print_event(e: &RunEvent) {
+    match e {
+        RunEvent::DatasetBuilding { name } => eprintln!("dataset {name}: building"),
+        RunEvent::DatasetSkipped { name, reason } => {
+            eprintln!("dataset {name}: skipped (optional): {reason}")
+        }
+        RunEvent::DatasetFailed { name, error } => {
+            eprintln!("dataset {name}: FAILED, its cells fail: {error}")
+        }
+        RunEvent::CellStarted { k, n, label } => eprintln!("[cell {k}/{n}] {label}: training"),
+        RunEvent::CellEnded {
+            k,
+            n,
+            label,
+            outcome,
+            elapsed_s,
+            eta_s,
+        } => {
+            let what = match outcome {
+                Outcome::Kept => "finished earlier, kept".to_string(),
+                Outcome::Done { wall_s, resumed } => format!(
+                    "{} in {}",
+                    if *resumed { "resumed, done" } else { "done" },
+                    fmt_s(*wall_s)
+                ),
+                Outcome::Failed { error } => format!("FAILED: {error}"),
+            };
+            let left = eta_s
+                .map(|s| format!(", about {} left", fmt_s(s)))
+                .unwrap_or_default();
+            eprintln!(
+                "[cell {k}/{n}] {label}: {what} (elapsed {}{left})",
+                fmt_s(*elapsed_s)
+            );
+        }
+    }
+}
+
+/// The tables and verdicts (everything of `tables.md` before the method descriptions), the
+/// magnitude readings, and the cells without a result, on stdout.
+fn print_results(
+    plan: &Plan,
+    rows: &[aggregate::Row],
+    verdicts: &[unispine::reproduce::verdict::Verdict],
+    tables: &unispine::doc::Doc,
+    claims_doc: Option<&std::path::Path>,
+) {
+    let head = unispine::reproduce::tables::results_part(tables).to_markdown();
+    println!("{}", head.trim_end());
+    println!();
+    for v in verdicts {
+        println!("verdict: {:<15} {}", v.word.as_str(), v.claim.text);
+    }
+    for m in unispine::reproduce::magnitude::scoped(plan, rows) {
+        println!(
+            "magnitude: [{}] {}: {}",
+            m.scope,
+            m.verdict.claim.text,
+            m.reading()
+        );
+    }
+    if let Some(doc) = claims_doc {
+        println!("claims document: {}", doc.display());
+    }
+    let missing = aggregate::missing(rows);
+    if !missing.is_empty() {
+        println!(
+            "\n{} of {} cells have no result: {}",
+            missing.len(),
+            rows.len(),
+            missing
+                .iter()
+                .map(|r| format!("{} ({})", r.run_dir, r.status))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
 }
