@@ -322,9 +322,43 @@ pub fn missing(rows: &[Row]) -> Vec<&Row> {
 
 #[cfg(test)]
 mod tests {
-    use super::{gather, method_label};
+    use super::{condition_suffix, gather, groups, method_label, Row};
     use crate::reproduce::plan::{Plan, TrainSchema};
     use std::path::Path;
+
+    /// Rows at a condition's value form their own group, labelled ` @ axis = value`; rows at
+    /// the base point are a group without a label.
+    #[test]
+    fn rows_at_a_condition_are_grouped_and_labelled_apart() {
+        let row = |seed, cond: Option<(&str, &str)>| Row {
+            dataset: "d".into(),
+            method: "m".into(),
+            seed,
+            condition: cond.map(|c| c.0.to_string()),
+            condition_value: cond.map(|c| c.1.to_string()),
+            ..Default::default()
+        };
+        let rows = [
+            row(0, None),
+            row(0, Some(("views", "25"))),
+            row(1, None),
+            row(1, Some(("views", "25"))),
+            row(0, Some(("views", "10"))),
+        ];
+        let g = groups(&rows);
+        let labels: Vec<(String, Vec<u64>)> = g
+            .iter()
+            .map(|x| (condition_suffix(&x.3), x.3.iter().map(|r| r.seed).collect()))
+            .collect();
+        assert_eq!(
+            labels,
+            [
+                (String::new(), vec![0, 1]),
+                (" @ views = 25".to_string(), vec![0, 1]),
+                (" @ views = 10".to_string(), vec![0]),
+            ]
+        );
+    }
 
     /// A run folder written here from the documented files (`cell.json`, `metrics.json`).
     fn write_cell(dir: &Path, status: &str, completed: bool, psnr: f64) {

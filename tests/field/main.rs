@@ -9,4 +9,5 @@ mod gemm;
 mod golden;
 mod gradcheck;
 mod sampling;
+mod stages;
 mod step_lr;

@@ -152,6 +152,12 @@ fn a_plan_runs_resumes_and_does_not_depend_on_jobs() {
         t.contains("magnitude: [ph] SPWM improves on X-Gaussian"),
         "{t}"
     );
+    // The verdict of the plan's claim, as the harness prints it.
+    assert!(
+        t.lines()
+            .any(|l| l.starts_with("verdict: ") && l.contains("SPWM improves on X-Gaussian")),
+        "{t}"
+    );
 
     // Run again: every cell is kept, nothing retrains.
     let ply = dir.join("a/runs/ph/unispine/seed1/model.ply");
