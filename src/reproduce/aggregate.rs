@@ -322,7 +322,7 @@ pub fn missing(rows: &[Row]) -> Vec<&Row> {
 
 #[cfg(test)]
 mod tests {
-    use super::{condition_suffix, gather, groups, method_label, Row};
+    use super::{condition_suffix, describe, gather, groups, method_label, Row};
     use crate::reproduce::plan::{Plan, TrainSchema};
     use std::path::Path;
 
@@ -358,6 +358,35 @@ mod tests {
                 (" @ views = 10".to_string(), vec![0]),
             ]
         );
+    }
+
+    /// A method row in words: its preset's help, and the flags a variant adds.
+    #[test]
+    fn methods_are_described_by_their_preset_and_flags() {
+        let text = "name = \"t\"\niters = 10\nseeds = [0]\nmethods = [\"unispine\", \"v\"]\n\
+                    [[datasets]]\nname = \"ph\"\ndata = [\"phantom\", \"--size\", \"16\"]\n\
+                    [variants.v]\nbase = \"xgaussian\"\ncolor = \"rirf-paper\"\n";
+        let dir = tempfile::tempdir().unwrap();
+        let plan = Plan::parse(
+            text,
+            Path::new("p.toml"),
+            dir.path(),
+            &TrainSchema::of_train(),
+        )
+        .unwrap();
+        let help = [
+            ("xgaussian".to_string(), "X-Gaussian's RIRF.".to_string()),
+            ("unispine".to_string(), "the full method.".to_string()),
+        ];
+        assert_eq!(
+            describe(&plan, "unispine", &help),
+            "`unispine` preset: the full method"
+        );
+        assert_eq!(
+            describe(&plan, "v", &help),
+            "`xgaussian` preset (X-Gaussian's RIRF) with `--color rirf-paper`"
+        );
+        assert_eq!(describe(&plan, "absent", &help), "");
     }
 
     /// A run folder written here from the documented files (`cell.json`, `metrics.json`).
