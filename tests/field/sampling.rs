@@ -167,6 +167,7 @@ fn the_batch_loss_samples_ray_k_from_stream_k() {
         "loss {loss} against {want_loss}"
     );
     let got = render_rays(&field, &rays, &sampling);
+    assert_eq!(got.len(), n_rays);
     for (k, (g, w)) in got.iter().zip(&want).enumerate() {
         assert!((g - w).abs() <= 1e-12 * w, "ray {k}: {g} against {w}");
     }
