@@ -536,6 +536,32 @@ mod tests {
         generate(&vol, &opts, &|_, _| {}).unwrap()
     }
 
+    /// The dataset's units per (metre x normalised value): 1000 mm per metre times the volume's
+    /// largest value, or 1000 when there is no volume or its largest value is not a positive
+    /// finite number.
+    #[test]
+    fn unit_scale_is_a_thousand_times_the_volume_s_maximum() {
+        let mut ds = dataset();
+        let with_max = |ds: &mut Dataset, vals: &[f32]| {
+            let v = ds.volume.as_mut().unwrap();
+            v.data.iter_mut().for_each(|x| *x = 0.0);
+            v.data[..vals.len()].copy_from_slice(vals);
+            unit_scale(ds)
+        };
+        assert_eq!(with_max(&mut ds, &[0.25, -3.0, 0.5]), 500.0);
+        assert_eq!(with_max(&mut ds, &[-0.5]), 1000.0); // the maximum is 0
+        ds.volume
+            .as_mut()
+            .unwrap()
+            .data
+            .iter_mut()
+            .for_each(|x| *x = -0.5);
+        assert_eq!(unit_scale(&ds), 1000.0);
+        assert_eq!(with_max(&mut ds, &[f32::INFINITY]), 1000.0);
+        ds.volume = None;
+        assert_eq!(unit_scale(&ds), 1000.0);
+    }
+
     #[test]
     fn rays_come_from_positive_pixels_or_from_all() {
         let ds = dataset();

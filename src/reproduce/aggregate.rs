@@ -327,7 +327,8 @@ mod tests {
     use std::path::Path;
 
     /// Rows at a condition's value form their own group, labelled ` @ axis = value`; rows at
-    /// the base point are a group without a label.
+    /// the base point are a group without a label; another dataset, method or sweep value is
+    /// another group.
     #[test]
     fn rows_at_a_condition_are_grouped_and_labelled_apart() {
         let row = |seed, cond: Option<(&str, &str)>| Row {
@@ -338,12 +339,21 @@ mod tests {
             condition_value: cond.map(|c| c.1.to_string()),
             ..Default::default()
         };
+        let mut other_method = row(2, None);
+        other_method.method = "n".into();
+        let mut other_dataset = row(3, None);
+        other_dataset.dataset = "e".into();
+        let mut other_sweep = row(4, None);
+        other_sweep.sweep_value = Some("0.1".into());
         let rows = [
             row(0, None),
             row(0, Some(("views", "25"))),
             row(1, None),
             row(1, Some(("views", "25"))),
             row(0, Some(("views", "10"))),
+            other_method,
+            other_dataset,
+            other_sweep,
         ];
         let g = groups(&rows);
         let labels: Vec<(String, Vec<u64>)> = g
@@ -356,6 +366,9 @@ mod tests {
                 (String::new(), vec![0, 1]),
                 (" @ views = 25".to_string(), vec![0, 1]),
                 (" @ views = 10".to_string(), vec![0]),
+                (String::new(), vec![2]),
+                (String::new(), vec![3]),
+                (String::new(), vec![4]),
             ]
         );
     }
