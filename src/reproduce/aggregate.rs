@@ -379,14 +379,7 @@ mod tests {
         let text = "name = \"t\"\niters = 10\nseeds = [0]\nmethods = [\"unispine\", \"v\"]\n\
                     [[datasets]]\nname = \"ph\"\ndata = [\"phantom\", \"--size\", \"16\"]\n\
                     [variants.v]\nbase = \"xgaussian\"\ncolor = \"rirf-paper\"\n";
-        let dir = tempfile::tempdir().unwrap();
-        let plan = Plan::parse(
-            text,
-            Path::new("p.toml"),
-            dir.path(),
-            &TrainSchema::of_train(),
-        )
-        .unwrap();
+        let plan = plan(text);
         let help = [
             ("xgaussian".to_string(), "X-Gaussian's RIRF.".to_string()),
             ("unispine".to_string(), "the full method.".to_string()),
@@ -400,6 +393,12 @@ mod tests {
             "`xgaussian` preset (X-Gaussian's RIRF) with `--color rirf-paper`"
         );
         assert_eq!(describe(&plan, "absent", &help), "");
+    }
+
+    /// A plan from its TOML text (no dataset is built).
+    fn plan(text: &str) -> Plan {
+        let dir = std::env::temp_dir();
+        Plan::parse(text, Path::new("p.toml"), &dir, &TrainSchema::of_train()).unwrap()
     }
 
     /// A run folder written here from the documented files (`cell.json`, `metrics.json`).
@@ -430,13 +429,7 @@ mod tests {
                     data = [\"phantom\", \"--size\", \"16\"]\n\
                     [[datasets]]\nname = \"b\"\npaper = \"FeSpine3D\"\n\
                     data = [\"phantom\", \"--size\", \"16\"]\n";
-        let plan = Plan::parse(
-            text,
-            Path::new("p.toml"),
-            tmp.path(),
-            &TrainSchema::of_train(),
-        )
-        .unwrap();
+        let plan = plan(text);
         let out = tmp.path();
         let run = |d: &str, s: u64| out.join(format!("runs/{d}/unispine/seed{s}"));
         write_cell(&run("a", 0), "done", true, 30.5);

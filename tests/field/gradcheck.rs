@@ -8,6 +8,8 @@ use unispine::field::encode::{Encoder, Frequency, HashGrid};
 use unispine::field::mlp::{Mlp, OutAct};
 use unispine::field::render::{self, Ray};
 use unispine::field::train::{loss_and_grad, Sampling};
+
+use crate::small_cfg;
 use unispine::field::{EncoderConfig, Field, FieldConfig};
 
 /// Relative error of a parameter group: `|analytic - fd| / |fd|` (2-norms over the group).
@@ -149,16 +151,6 @@ fn frequency_encoding_closed_form() {
             assert_eq!(o[3 + 6 * k + 3 + d], (fr * x[d]).cos());
         }
     }
-}
-
-fn small_cfg(encoder: EncoderConfig) -> FieldConfig {
-    let mut c = FieldConfig::preset("naf", 10).unwrap();
-    c.encoder = encoder;
-    c.hidden_dim = 8;
-    c.num_layers = 4;
-    c.skips = vec![2];
-    c.n_samples = 6;
-    c
 }
 
 fn rays() -> Vec<Ray> {

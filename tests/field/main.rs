@@ -11,3 +11,16 @@ mod gradcheck;
 mod sampling;
 mod stages;
 mod step_lr;
+
+use unispine::field::{EncoderConfig, FieldConfig};
+
+/// A small NAF field for the tests: 8 hidden units, 4 layers with a skip at 2, 6 samples a ray.
+fn small_cfg(encoder: EncoderConfig) -> FieldConfig {
+    let mut c = FieldConfig::preset("naf", 10).unwrap();
+    c.encoder = encoder;
+    c.hidden_dim = 8;
+    c.num_layers = 4;
+    c.skips = vec![2];
+    c.n_samples = 6;
+    c
+}

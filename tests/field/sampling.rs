@@ -127,11 +127,8 @@ fn near_far_is_naf_s_constant_interval() {
 #[test]
 fn the_batch_loss_samples_ray_k_from_stream_k() {
     use unispine::field::train::{loss_and_grad, render_rays, Sampling, RAYS_PER_BLOCK};
-    use unispine::field::{Field, FieldConfig};
-    let mut cfg = FieldConfig::preset("naf", 10).unwrap();
-    cfg.hidden_dim = 8;
-    cfg.num_layers = 3;
-    cfg.skips = vec![];
+    use unispine::field::{EncoderConfig, Field};
+    let mut cfg = crate::small_cfg(EncoderConfig::Frequency { bands: 2 });
     cfg.n_samples = 5;
     let field = Field::<f64>::new(&cfg).unwrap();
     let n_rays = 2 * RAYS_PER_BLOCK + 3;

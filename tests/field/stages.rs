@@ -4,21 +4,17 @@
 use std::sync::Mutex;
 use unispine::field::render::{self, Ray};
 use unispine::field::train::{Sampling, StageTimes, Workspace};
-use unispine::field::{EncoderConfig, Field, FieldConfig};
+use unispine::field::{EncoderConfig, Field};
 use unispine::simd::Simd;
 
 #[test]
 fn every_stage_is_timed_and_timing_changes_no_bit() {
-    let mut cfg = FieldConfig::preset("naf", 10).unwrap();
-    cfg.encoder = EncoderConfig::HashGrid {
+    let mut cfg = crate::small_cfg(EncoderConfig::HashGrid {
         levels: 3,
         features: 2,
         table_size: 64,
         base_resolution: 2,
-    };
-    cfg.hidden_dim = 8;
-    cfg.num_layers = 3;
-    cfg.skips = vec![];
+    });
     cfg.n_samples = 16;
     let field = Field::<f32>::new(&cfg).unwrap();
     let rays: Vec<Ray> = (0..64)
