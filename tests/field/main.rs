@@ -8,6 +8,7 @@ mod encoders;
 mod gemm;
 mod golden;
 mod gradcheck;
+mod model_file;
 mod sampling;
 mod stages;
 mod step_lr;

@@ -107,5 +107,9 @@ mod tests {
         assert_eq!(normalise_value("5"), normalise_value("5e0"));
         assert_ne!(normalise_value("5"), normalise_value("50"));
         assert_eq!(normalise_value("Rirf"), normalise_value("rirf"));
+        // Only finite numbers compare by value: `inf` and `infinity` are two texts (two
+        // folders), though both parse as the same infinite number.
+        assert_ne!(normalise_value("inf"), normalise_value("infinity"));
+        assert_eq!(normalise_value("INF"), normalise_value("inf"));
     }
 }

@@ -184,4 +184,25 @@ mod tests {
             assert!(!valid_slurm_name(bad), "{bad:?}");
         }
     }
+
+    /// Every length bound of the grammars at both sides of its limit.
+    #[test]
+    fn length_bounds_hold_at_both_endpoints() {
+        assert!(valid_mem(&format!("{}G", "9".repeat(12))));
+        assert!(!valid_mem(&format!("{}G", "9".repeat(13))));
+        assert!(valid_mem(&"9".repeat(12)));
+        assert!(!valid_mem(&"9".repeat(13)));
+        assert!(valid_time("9999-00:00:00"));
+        assert!(!valid_time("99999-00:00:00"));
+        assert!(valid_time("999:00:00"));
+        assert!(!valid_time("9999:00:00"));
+        assert!(valid_time("00:59:00") && valid_time("00:00:59"));
+        assert!(!valid_time("00:5:00") && !valid_time("00:000:00"));
+        assert!(valid_slurm_name(&"p".repeat(64)));
+        assert!(!valid_slurm_name(&"p".repeat(65)));
+        assert!(
+            valid_slurm_name("a-"),
+            "`-` is allowed after the first character"
+        );
+    }
 }

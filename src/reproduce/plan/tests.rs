@@ -574,3 +574,18 @@ fn a_replacing_preset_runs_with_its_own_settings() {
     let thr = args("3dgs@upstream-grad-threshold=0.0002");
     assert!(has(&thr, "--init", "random") && has(&thr, "--grad-threshold", "0.0002"));
 }
+
+#[test]
+fn a_switch_in_a_variant_is_its_flag_when_true_and_nothing_when_false() {
+    let on = parse(&format!("{OK}compress_schedule = true\n")).unwrap();
+    assert_eq!(
+        on.methods[1].args,
+        vec!["--color", "rirf-paper", "--compress-schedule"]
+    );
+    let off = parse(&format!("{OK}compress_schedule = false\n")).unwrap();
+    assert_eq!(off.methods[1].args, vec!["--color", "rirf-paper"]);
+    let e = parse(&format!("{OK}compress_schedule = 1\n"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("is a switch"), "{e}");
+}

@@ -1,0 +1,99 @@
+//! The field's model file read back with an npz reader and evaluated by an f64 MLP written
+//! from the file format alone (the `src/field/model.rs` header: `z = x @ w{i} + b{i}`,
+//! LeakyReLU 0.01 between layers, `cat([encoding, h])` into each skip layer, the output
+//! activation of `mlp_meta[3]`), on the frequency encoding of the point written out by hand.
+
+use ndarray::{Array1, Array2};
+use unispine::field::{model, EncoderConfig, Field};
+
+fn leaky(x: f64) -> f64 {
+    if x > 0.0 {
+        x
+    } else {
+        0.01 * x
+    }
+}
+
+#[test]
+fn a_saved_field_evaluates_to_its_density_from_the_file_alone() {
+    let bands = 3;
+    let mut cfg = crate::small_cfg(EncoderConfig::Frequency { bands });
+    cfg.skips = vec![2];
+    let mut field = Field::<f32>::new(&cfg).unwrap();
+    // Every parameter distinct and non-zero, so that a weight stored in another's place shows.
+    for (i, p) in field.params.iter_mut().enumerate() {
+        *p = (((i * 7919) % 1013) as f32 / 1013.0 - 0.5) * 0.9;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("model.npz");
+    model::save(&path, &field).unwrap();
+
+    let mut npz = ndarray_npy::NpzReader::new(std::fs::File::open(&path).unwrap()).unwrap();
+    let meta: Array1<i64> = npz.by_name("mlp_meta").unwrap();
+    let skips: Array1<i64> = npz.by_name("skips").unwrap();
+    let fb: Array1<i64> = npz.by_name("freq_bands").unwrap();
+    let (layers, hidden, ed) = (meta[0] as usize, meta[1] as usize, meta[2] as usize);
+    assert_eq!((layers, hidden, fb[0] as usize), (4, 8, bands));
+    assert_eq!(ed, 3 + 6 * bands);
+    assert_eq!(skips.to_vec(), vec![2]);
+    let mut w = Vec::new();
+    let mut b = Vec::new();
+    for i in 0..layers {
+        let wi: Array2<f32> = npz.by_name(&format!("w{i}")).unwrap();
+        let bi: Array1<f32> = npz.by_name(&format!("b{i}")).unwrap();
+        assert_eq!(wi.ncols(), bi.len(), "layer {i}");
+        w.push(wi);
+        b.push(bi);
+    }
+    // Every parameter is in the file once.
+    let stored: usize =
+        w.iter().map(|a| a.len()).sum::<usize>() + b.iter().map(|a| a.len()).sum::<usize>();
+    assert_eq!(stored, field.params.len());
+
+    let pts: Vec<[f32; 3]> = vec![[0.01, -0.02, 0.03], [-0.05, 0.04, 0.0], [0.08, 0.07, -0.06]];
+    let got = field.density(&pts);
+    for (p, &g) in pts.iter().zip(&got) {
+        let x: Vec<f64> = p.iter().map(|&v| v as f64).collect();
+        let mut enc = x.clone();
+        for k in 0..bands {
+            let f = 2f64.powi(k as i32);
+            enc.extend(x.iter().map(|&v| (f * v).sin()));
+            enc.extend(x.iter().map(|&v| (f * v).cos()));
+        }
+        let mut h = enc.clone();
+        for i in 0..layers {
+            let input: Vec<f64> = if i > 0 && skips.iter().any(|&s| s as usize == i) {
+                enc.iter().chain(&h).copied().collect()
+            } else {
+                h.clone()
+            };
+            assert_eq!(input.len(), w[i].nrows(), "layer {i}'s input width");
+            let z: Vec<f64> = (0..w[i].ncols())
+                .map(|o| {
+                    b[i][o] as f64
+                        + input
+                            .iter()
+                            .enumerate()
+                            .map(|(r, &v)| v * w[i][[r, o]] as f64)
+                            .sum::<f64>()
+                })
+                .collect();
+            h = if i + 1 < layers {
+                z.into_iter().map(leaky).collect()
+            } else {
+                z
+            };
+        }
+        assert_eq!(h.len(), 1);
+        let want = match meta[3] {
+            0 => 1.0 / (1.0 + (-h[0]).exp()),
+            1 => leaky(h[0]),
+            2 => h[0].exp().ln_1p(),
+            a => panic!("output activation {a}"),
+        };
+        assert!(
+            (g as f64 - want).abs() <= 1e-5 * want.abs().max(1e-3),
+            "density at {p:?}: field {g}, from the file {want}"
+        );
+    }
+}
