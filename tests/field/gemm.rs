@@ -356,6 +356,10 @@ fn elementwise_passes_match_plain_loops_on_every_path() {
         d[off] = 0.0;
         let mut z = rand_vec(&mut rng, n * w);
         z[0] = 0.0;
+        // A zero input where the upstream value is not zero: LeakyReLU takes the slope at 0
+        // (PyTorch: `x > 0 ? g : g * slope`).
+        z[n * w - 1] = 0.0;
+        assert!(n * w == 1 || d[off + (n - 1) * ld + w - 1] != 0.0);
         let slope = 0.01f32;
         let mut want = vec![f32::NAN; n * w];
         for r in 0..n {
@@ -381,6 +385,22 @@ fn elementwise_passes_match_plain_loops_on_every_path() {
             let mut sum = acc0.clone();
             act::sum_rows(simd, &z, n, w, &mut sum);
             assert_eq!(b(&sum), b(&want_sum), "sum_rows {simd:?} ({n},{w})");
+        }
+    }
+}
+
+/// An empty block (no rows, or rows of no values) is nothing to do on every path, whatever the
+/// row stride: no bound is computed from `n - 1` rows when there is none.
+#[test]
+fn elementwise_passes_on_an_empty_block_do_nothing() {
+    use unispine::field::act::{self, Rows};
+    for simd in Simd::supported_paths() {
+        for (n, w) in [(0, 3), (4, 0), (0, 0)] {
+            let mut out = vec![7.0f32; 2];
+            let src = Rows { ld: 5, off: 0 };
+            let dst = Rows { ld: 4, off: 0 };
+            act::leaky(simd, &[], src, &[], n, w, 0.01, &mut out, dst);
+            assert_eq!(out, vec![7.0; 2], "{simd:?} n {n} w {w}");
         }
     }
 }

@@ -565,3 +565,6 @@ impl super::Plan {
         out
     }
 }
+
+#[cfg(test)]
+mod tests;

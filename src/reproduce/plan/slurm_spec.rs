@@ -205,4 +205,47 @@ mod tests {
             "`-` is allowed after the first character"
         );
     }
+
+    /// A plan with one variant, parsed with the schema of `unispine train`.
+    const OK: &str = "name = \"t\"\niters = 10\nseeds = [0]\nmethods = [\"v\"]\n\
+                      [[datasets]]\nname = \"ph\"\ndata = [\"phantom\"]\n\
+                      [variants.v]\nbase = \"xgaussian\"\n";
+
+    fn parse(t: &str) -> Result<super::super::Plan> {
+        let dir = std::env::temp_dir();
+        let schema = super::super::TrainSchema::of_train();
+        super::super::Plan::parse(t, Path::new("p.toml"), &dir, &schema)
+    }
+
+    #[test]
+    fn a_slurm_table_is_kept_value_for_value_and_each_bad_value_is_named() {
+        let t = format!(
+            "{OK}[slurm]\ncpus_per_task = 1024\nmem = \"16G\"\ntime = \"1-00:00:00\"\n\
+             partition = \"gpu-a\"\naccount = \"lab_1\"\n"
+        );
+        // `[slurm]` after `[variants.v]` is a table of its own.
+        let p = parse(&t).unwrap();
+        let want = SlurmSpec {
+            cpus_per_task: 1024,
+            mem: "16G".into(),
+            time: "1-00:00:00".into(),
+            partition: Some("gpu-a".into()),
+            account: Some("lab_1".into()),
+        };
+        assert_eq!(p.slurm, want);
+        assert_eq!(parse(OK).unwrap().slurm, SlurmSpec::default());
+        for (bad, key) in [
+            ("cpus_per_task = 1025", "slurm.cpus_per_task"),
+            ("cpus_per_task = 0", "slurm.cpus_per_task"),
+            ("mem = \"4GB\"", "slurm.mem"),
+            ("time = \"2:00\"", "slurm.time"),
+            ("partition = \"-p\"", "slurm.partition"),
+            ("account = \"a b\"", "slurm.account"),
+        ] {
+            let e = parse(&format!("{OK}[slurm]\n{bad}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(key) && e.contains("p.toml"), "{bad}: {e}");
+        }
+    }
 }
