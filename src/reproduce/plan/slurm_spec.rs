@@ -206,16 +206,12 @@ mod tests {
         );
     }
 
-    /// A plan with one variant, parsed with the schema of `unispine train`.
+    /// A plan with one variant.
     const OK: &str = "name = \"t\"\niters = 10\nseeds = [0]\nmethods = [\"v\"]\n\
                       [[datasets]]\nname = \"ph\"\ndata = [\"phantom\"]\n\
                       [variants.v]\nbase = \"xgaussian\"\n";
 
-    fn parse(t: &str) -> Result<super::super::Plan> {
-        let dir = std::env::temp_dir();
-        let schema = super::super::TrainSchema::of_train();
-        super::super::Plan::parse(t, Path::new("p.toml"), &dir, &schema)
-    }
+    use super::super::tests::parse;
 
     #[test]
     fn a_slurm_table_is_kept_value_for_value_and_each_bad_value_is_named() {

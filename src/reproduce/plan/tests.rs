@@ -2,7 +2,9 @@
 
 use super::*;
 
-fn parse(t: &str) -> Result<Plan> {
+/// A plan text parsed as the file `p.toml` with the schema of `unispine train` (also used by
+/// the tests of the plan's submodules).
+pub(super) fn parse(t: &str) -> Result<Plan> {
     let dir = std::env::temp_dir();
     Plan::parse(t, Path::new("p.toml"), &dir, &TrainSchema::of_train())
 }

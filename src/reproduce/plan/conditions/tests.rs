@@ -1,7 +1,6 @@
 //! The checks of a condition's values and keys.
 
 use super::*;
-use std::path::Path;
 
 /// Every kind of data-flag value at both sides of its bound.
 #[test]
@@ -44,10 +43,7 @@ fn each_condition_target_names_the_key_it_was_read_from() {
                 _ => "methods = [\"3dgs\"]\nvalues = [\"w\"]\n",
             }
         );
-        let dir = std::env::temp_dir();
-        let schema = super::super::TrainSchema::of_train();
-        let p = super::super::Plan::parse(&text, Path::new("p.toml"), &dir, &schema)
-            .unwrap_or_else(|e| panic!("{key}: {e}"));
+        let p = super::super::tests::parse(&text).unwrap_or_else(|e| panic!("{key}: {e}"));
         assert_eq!(p.conditions[0].on.as_str(), key);
     }
 }
