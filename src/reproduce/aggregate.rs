@@ -323,7 +323,7 @@ pub fn missing(rows: &[Row]) -> Vec<&Row> {
 #[cfg(test)]
 mod tests {
     use super::{condition_suffix, describe, gather, groups, method_label, Row};
-    use crate::reproduce::plan::{Plan, TrainSchema};
+    use crate::reproduce::plan::Plan;
     use std::path::Path;
 
     /// Rows at a condition's value form their own group, labelled ` @ axis = value`; rows at
@@ -397,8 +397,7 @@ mod tests {
 
     /// A plan from its TOML text (no dataset is built).
     fn plan(text: &str) -> Plan {
-        let dir = std::env::temp_dir();
-        Plan::parse(text, Path::new("p.toml"), &dir, &TrainSchema::of_train()).unwrap()
+        crate::reproduce::plan::tests::parse(text).unwrap()
     }
 
     /// A run folder written here from the documented files (`cell.json`, `metrics.json`).

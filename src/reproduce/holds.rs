@@ -16,8 +16,6 @@ use super::plan::conditions::Condition;
 use super::plan::Plan;
 use super::verdict::{claims_for, Claim, Measure};
 use crate::doc::{Doc, Table};
-#[cfg(test)]
-use std::path::Path;
 
 /// One claim at one condition value, pooled and per dataset.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -178,7 +176,6 @@ pub fn describe_conditions(plan: &Plan) -> Doc {
 pub(crate) mod tests {
     use super::*;
     use crate::reproduce::magnitude::Place;
-    use crate::reproduce::plan::TrainSchema;
     use crate::reproduce::verdict::{paired_interval, Word};
 
     /// A plan with a pose-noise axis on every method and an init axis on 3dgs only.
@@ -191,13 +188,7 @@ pub(crate) mod tests {
         [[datasets]]\nname = \"ct\"\ndata = [\"phantom\"]\npaper = \"CTSpine3D\"\n";
 
     pub(crate) fn plan() -> Plan {
-        Plan::parse(
-            PLAN,
-            Path::new("h.toml"),
-            Path::new("."),
-            &TrainSchema::of_train(),
-        )
-        .unwrap()
+        crate::reproduce::plan::tests::parse(PLAN).unwrap()
     }
 
     fn row(method: &str, seed: u64, cond: Option<(&str, &str)>, psnr: f64) -> Row {

@@ -705,4 +705,4 @@ pub fn builtin(name: &str) -> Option<&'static str> {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -3,8 +3,8 @@
 use super::*;
 
 /// A plan text parsed as the file `p.toml` with the schema of `unispine train` (also used by
-/// the tests of the plan's submodules).
-pub(super) fn parse(t: &str) -> Result<Plan> {
+/// the unit tests of the other harness modules).
+pub(crate) fn parse(t: &str) -> Result<Plan> {
     let dir = std::env::temp_dir();
     Plan::parse(t, Path::new("p.toml"), &dir, &TrainSchema::of_train())
 }
