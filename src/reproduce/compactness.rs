@@ -237,4 +237,77 @@ mod tests {
             .collect();
         assert!(section(&plain).is_empty());
     }
+
+    #[test]
+    fn rungs_are_ordered_by_count_failed_cells_are_left_out_and_the_bound_is_inclusive() {
+        // Unbounded: 0.1 dB at 1000 Gaussians (seed 0). Drops are exact in binary: 0.0 - 0.1 is
+        // -0.1 exactly, the bound itself.
+        let u = (1000, 0.1);
+        let mut failed = row("0.05", 0, 50, 0.0, u);
+        failed.psnr = None;
+        let mut no_fps = row("0.4", 0, 400, 0.0, u);
+        no_fps.fps = None;
+        let rows = vec![
+            // Listed largest first: the table and the choice go by count, not by plan order.
+            row("0.8", 0, 800, 0.1, u),
+            no_fps,
+            row("0.2", 0, 200, -0.5, u),
+            failed,
+        ];
+        let s = section(&rows).to_markdown();
+        let (i2, i4, i8) = (
+            s.find("| 0.2 |").unwrap(),
+            s.find("| 0.4 |").unwrap(),
+            s.find("| 0.8 |").unwrap(),
+        );
+        assert!(i2 < i4 && i4 < i8, "{s}");
+        // A failed cell is no rung; a drop of exactly -0.1 dB is within; no fps is NaN.
+        assert!(!s.contains("| 0.05 |"), "{s}");
+        assert!(
+            s.contains("| 0.4 | 400 | 0.000 | -0.100 (-0.100) | NaN | 1 | yes |"),
+            "{s}"
+        );
+        assert!(
+            s.contains("| 0.2 | 200 | -0.500 | -0.600 (-0.600) | 300.0 | 1 | no |"),
+            "{s}"
+        );
+        assert!(
+            s.contains("Smallest within 0.1 dB: compact-keep 0.4: 400 Gaussians (40 % of the unbounded 1000), 0.000 dB (mean drop -0.100 dB), NaN fps."),
+            "{s}"
+        );
+    }
+
+    #[test]
+    fn with_no_rung_within_the_unbounded_model_is_the_smallest_per_dataset_and_method() {
+        let mut rows = vec![
+            row("0.1", 0, 100, 29.0, (900, 30.0)),
+            row("0.1", 1, 140, 28.0, (1100, 30.0)),
+        ];
+        // Another method on the same dataset with its own ladder, and a plain cell (no
+        // unbounded model) that adds nothing.
+        let mut other = row("0.5", 0, 50, 30.0, (100, 30.0));
+        other.method = "k".into();
+        rows.push(other);
+        let mut plain = row("0.9", 0, 5, 10.0, (0, 0.0));
+        plain.unbounded_psnr = None;
+        rows.push(plain);
+        let s = section(&rows).to_markdown();
+        assert!(s.contains("**d / m**") && s.contains("**d / k**"), "{s}");
+        assert!(
+            s.contains("**No rung is within 0.1 dB: the unbounded model (1000 Gaussians) is the smallest.**"),
+            "{s}"
+        );
+        assert!(
+            s.contains("| 0.1 | 120 | 28.500 | -1.500 (-2.000) | 220.0 | 2 | no |"),
+            "{s}"
+        );
+        assert!(!s.contains("| 0.9 |"), "{s}");
+        assert_eq!(
+            unbounded(&rows),
+            vec![
+                ("d".into(), "m".into(), 1000.0, 30.0),
+                ("d".into(), "k".into(), 100.0, 30.0)
+            ]
+        );
+    }
 }
