@@ -433,4 +433,55 @@ mod tests {
         assert_eq!(pooled_effect(&[(3, Some(8.21)), (2, None)]), None);
         assert_eq!(pooled_effect(&[]), None);
     }
+
+    #[test]
+    fn the_interval_s_ends_are_inside_and_every_sign_word_reads_with_its_place() {
+        // Both ends belong to the interval; non-finite ends or one pair test nothing.
+        assert_eq!(place(Some(1.0), 1.0, 2.0, 2), Place::Inside);
+        assert_eq!(place(Some(2.0), 1.0, 2.0, 2), Place::Inside);
+        assert_eq!(place(Some(2.0), 1.0, 2.0, 1), Place::NotTested);
+        assert_eq!(
+            place(Some(1.5), f64::NEG_INFINITY, 2.0, 5),
+            Place::NotTested
+        );
+        assert_eq!(place(Some(1.5), 1.0, f64::NAN, 5), Place::NotTested);
+        assert_eq!(place(Some(f64::INFINITY), 1.0, 2.0, 5), Place::NotTested);
+        assert_eq!(place(None, 1.0, 2.0, 5), Place::NotTested);
+        // d = -0.6, -0.5, -0.4: an interval below 0, sign not reproduced.
+        let mut v = verdict_on(&[-0.6, -0.5, -0.4]);
+        assert_eq!(v.word, Word::NotReproduced);
+        let s = Scoped::new("us", v.clone(), Some(-0.5));
+        assert_eq!(
+            s.reading(),
+            "sign not reproduced, magnitude consistent (paper -0.50 dB is inside the interval)"
+        );
+        let s = Scoped::new("us", v.clone(), Some(-3.0));
+        assert_eq!(
+            s.reading(),
+            "sign not reproduced, magnitude not (paper -3.00 dB is below the interval)"
+        );
+        // An inconclusive sign with the paper's effect outside the interval.
+        v.word = Word::Inconclusive;
+        let s = Scoped::new("us", v.clone(), Some(4.0));
+        assert_eq!(
+            s.reading(),
+            "sign inconclusive, magnitude not (paper +4.00 dB is above the interval)"
+        );
+        // The table cells: the interval from two pairs on, the paper's effect or "-".
+        assert_eq!(s.interval_cell(|x| format!("{x:.1}")), "[-0.7, -0.3]");
+        assert_eq!(s.paper_cell(), "+4.00 dB");
+        let two = Scoped::new("us", verdict_on(&[1.0, 2.0]), None);
+        assert!(
+            two.interval_cell(db).starts_with('['),
+            "{}",
+            two.interval_cell(db)
+        );
+        assert_eq!(two.paper_cell(), "-");
+        let one = Scoped::new("us", verdict_on(&[1.0]), Some(1.0));
+        assert_eq!(one.interval_cell(db), "-");
+        assert_eq!(one.reading(), "sign inconclusive");
+        assert_eq!(db(0.25), "+0.250 dB");
+        assert_eq!(db(f64::NAN), "-");
+        assert_eq!(db(f64::INFINITY), "-");
+    }
 }

@@ -387,7 +387,7 @@ pub fn write_all(
 
 #[cfg(test)]
 mod tests {
-    use super::{pm_sig, provenance, results_part, Row, WHAT_RUNS};
+    use super::{pm_sig, provenance, results_part, without_result, Row, WHAT_RUNS};
     use crate::doc::{Block, Doc};
 
     #[test]
@@ -443,5 +443,68 @@ mod tests {
         assert_eq!(pm_sig(&[0.0817, 0.0817], 3), "0.0817 ± 0.0000");
         assert_eq!(pm_sig(&[0.0], 3), "0.00");
         assert_eq!(pm_sig(&[], 3), "-");
+    }
+
+    #[test]
+    fn cells_without_a_result_are_counted_and_listed_with_their_error_on_one_line() {
+        let row = |dir: &str, status: &str, psnr: Option<f64>, err: Option<&str>| Row {
+            run_dir: dir.into(),
+            status: status.into(),
+            psnr,
+            error: err.map(Into::into),
+            ..Default::default()
+        };
+        let rows = [
+            row("runs/a", "done", Some(30.0), None),
+            row("runs/b", "failed", None, Some("line one\nline two")),
+            row("runs/c", "missing", None, None),
+        ];
+        let mut d = Doc::new();
+        without_result(&mut d, &rows);
+        assert_eq!(
+            d.blocks,
+            [
+                Block::Heading(2, "Cells without a result (2 of 3)".into()),
+                Block::List(vec![
+                    "`runs/b`: failed: line one line two".into(),
+                    "`runs/c`: missing".into()
+                ])
+            ]
+        );
+        // Every cell with a result: no section.
+        let mut d = Doc::new();
+        without_result(&mut d, &rows[..1]);
+        assert!(d.blocks.is_empty());
+    }
+
+    #[test]
+    fn each_distinct_build_and_machine_is_listed_once() {
+        let row = |commit: &str, cores: usize| Row {
+            version: Some("0.9".into()),
+            git_commit: Some(commit.into()),
+            cpu_model: Some("cpu".into()),
+            cores: Some(cores),
+            simd: Some("avx2".into()),
+            threads: Some(2),
+            ..Default::default()
+        };
+        // A row without a record (no version) adds no build line.
+        let rows = [row("abc", 2), row("abc", 2), row("def", 4), Row::default()];
+        let mut d = Doc::new();
+        provenance(&mut d, &rows);
+        let Some(Block::List(items)) = d.blocks.get(1) else {
+            panic!("{d:?}")
+        };
+        assert_eq!(
+            items[..2],
+            [
+                "unispine 0.9 (commit abc), CPU cpu (2 cores, SIMD avx2), 2 threads per run"
+                    .to_string(),
+                "unispine 0.9 (commit def), CPU cpu (4 cores, SIMD avx2), 2 threads per run"
+                    .to_string()
+            ]
+        );
+        assert_eq!(items.len(), 3, "{items:?}");
+        assert_eq!(d.blocks[0], Block::Heading(2, "Provenance".into()));
     }
 }
