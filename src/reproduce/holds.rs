@@ -247,6 +247,14 @@ pub(crate) mod tests {
     fn each_condition_value_gets_its_interval_and_both_verdicts() {
         let p = plan();
         let h = holds(&p, &rows());
+        // Only the claims whose two methods the plan has (not SPWM's: no `unispine`).
+        let names: Vec<&str> = p.methods.iter().map(|m| m.name.as_str()).collect();
+        assert!(!h.is_empty());
+        assert!(
+            h.iter()
+                .all(|x| names.contains(&x.claim.a.as_str()) && names.contains(&x.claim.b.as_str())),
+            "{names:?}"
+        );
         let first: Vec<&Holds> = h
             .iter()
             .filter(|x| x.claim.a == "xgaussian" && x.claim.b == "3dgs")

@@ -484,4 +484,46 @@ mod tests {
         assert_eq!(db(f64::NAN), "-");
         assert_eq!(db(f64::INFINITY), "-");
     }
+
+    #[test]
+    fn the_section_holds_each_accuracy_claim_pooled_and_per_dataset() {
+        let plan = crate::reproduce::plan::tests::parse(
+            "name = \"t\"\niters = 10\nseeds = [0, 1]\nmethods = [\"3dgs\", \"xgaussian\"]\n\
+             [[datasets]]\nname = \"ph\"\ndata = [\"phantom\"]\n",
+        )
+        .unwrap();
+        let row = |method: &str, seed: u64, psnr: f64| Row {
+            dataset: "ph".into(),
+            method: method.into(),
+            seed,
+            psnr: Some(psnr),
+            ..Default::default()
+        };
+        // xgaussian - 3dgs: +1.0 and +2.0 dB.
+        let rows = [
+            row("3dgs", 0, 30.0),
+            row("xgaussian", 0, 31.0),
+            row("3dgs", 1, 30.0),
+            row("xgaussian", 1, 32.0),
+        ];
+        let md = section(&plan, &rows).to_markdown();
+        assert!(
+            md.contains("## Verdicts on magnitude, per dataset and pooled"),
+            "{md}"
+        );
+        let line = |scope: &str| {
+            md.lines()
+                .find(|l| {
+                    l.contains("RIRF + ACUI beat 3DGS") && l.contains(&format!("| {scope} |"))
+                })
+                .unwrap_or_else(|| panic!("{scope}: {md}"))
+                .to_string()
+        };
+        for scope in ["pooled", "ph"] {
+            let l = line(scope);
+            assert!(l.contains("| 2 | +1.500 dB |"), "{l}");
+            // The plan dataset stands in for no paper dataset: no paper effect.
+            assert!(l.ends_with("| - | sign inconclusive |"), "{l}");
+        }
+    }
 }

@@ -464,14 +464,16 @@ fn parse_one(rc: &Spanned<RawCondition>, cx: &Ctx) -> Result<Condition> {
 }
 
 /// Set `--flag value` in `unispine data` arguments: replace the flag's value when the
-/// arguments already give it, else append it.
+/// arguments already give it (a flag left last without a value gets it), else append it.
 pub fn set_data_flag(args: &mut Vec<String>, flag: &str, value: &str) {
     let f = format!("--{flag}");
     if let Some(i) = args.iter().position(|a| *a == f) {
         if i + 1 < args.len() {
             args[i + 1] = value.to_string();
-            return;
+        } else {
+            args.push(value.to_string());
         }
+        return;
     }
     let eq = format!("{f}=");
     if let Some(i) = args.iter().position(|a| a.starts_with(&eq)) {

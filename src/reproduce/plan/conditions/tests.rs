@@ -47,3 +47,91 @@ fn each_condition_target_names_the_key_it_was_read_from() {
         assert_eq!(p.conditions[0].on.as_str(), key);
     }
 }
+
+/// A plan over `3dgs` and `fdk` with the given `[[conditions]]` blocks.
+fn plan_with(conditions: &str) -> crate::error::Result<crate::reproduce::plan::Plan> {
+    super::super::tests::parse(&format!(
+        "name = \"t\"\niters = 10\nseeds = [0]\nmethods = [\"3dgs\", \"fdk\"]\n\
+         [[datasets]]\nname = \"ph\"\ndata = [\"phantom\"]\n{conditions}"
+    ))
+}
+
+#[test]
+fn one_axis_per_data_or_train_flag() {
+    let block = |axis: &str, v: &str| {
+        format!("[[conditions]]\naxis = \"{axis}\"\non = \"data\"\nflag = \"pose-noise-deg\"\nvalues = [{v}]\n")
+    };
+    let e = plan_with(&(block("a", "0.1") + &block("b", "0.2")))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("flag `pose-noise-deg` is already the axis `a`"),
+        "{e}"
+    );
+    // Another flag is another axis.
+    let other = block("b", "0.2").replace("pose-noise-deg", "pose-noise-mm");
+    let ok = plan_with(&(block("a", "0.1") + &other));
+    assert!(ok.is_ok(), "{:?}", ok.err());
+}
+
+#[test]
+fn a_gaussian_setting_may_not_act_on_a_baseline() {
+    let cond = |methods: &str| {
+        format!(
+            "[[conditions]]\naxis = \"i\"\non = \"train\"\nflag = \"init\"\n{methods}\
+             values = [\"acui\"]\n"
+        )
+    };
+    let e = plan_with(&cond("methods = [\"3dgs\", \"fdk\"]\n"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("`init` is a Gaussian training setting and `fdk` a baseline"),
+        "{e}"
+    );
+    let ok = plan_with(&cond("methods = [\"3dgs\"]\n"));
+    assert!(ok.is_ok(), "{:?}", ok.err());
+}
+
+#[test]
+fn a_data_condition_s_values_are_checked_with_the_kind_of_its_own_flag() {
+    let cond = |v: &str| {
+        format!(
+            "[[conditions]]\naxis = \"d\"\non = \"data\"\nflag = \"detector\"\nvalues = [{v}]\n"
+        )
+    };
+    let e = plan_with(&cond("1.5")).unwrap_err().to_string();
+    assert!(e.contains("--detector:"), "{e}");
+    let ok = plan_with(&cond("64"));
+    assert!(ok.is_ok(), "{:?}", ok.err());
+}
+
+#[test]
+fn a_data_flag_is_replaced_where_given_and_appended_where_not() {
+    let set = |args: &[&str], flag: &str, value: &str| {
+        let mut a: Vec<String> = args.iter().map(|s| s.to_string()).collect();
+        set_data_flag(&mut a, flag, value);
+        a
+    };
+    assert_eq!(
+        set(
+            &["phantom", "--detector", "32", "--size", "16"],
+            "detector",
+            "64"
+        ),
+        ["phantom", "--detector", "64", "--size", "16"]
+    );
+    assert_eq!(
+        set(&["phantom", "--detector=32"], "detector", "64"),
+        ["phantom", "--detector=64"]
+    );
+    assert_eq!(
+        set(&["phantom", "--size", "16"], "detector", "64"),
+        ["phantom", "--size", "16", "--detector", "64"]
+    );
+    // The flag last, with no value after it: the value goes after it.
+    assert_eq!(
+        set(&["phantom", "--detector"], "detector", "64"),
+        ["phantom", "--detector", "64"]
+    );
+}
