@@ -96,3 +96,41 @@ fn a_saved_field_evaluates_to_its_density_from_the_file_alone() {
         );
     }
 }
+
+/// A TensoRF VM field's file: the planes, lines and basis under their names with the shapes
+/// the header gives, every encoder parameter stored once, in place.
+#[test]
+fn a_saved_tensor_vm_field_keeps_planes_lines_and_basis_in_place() {
+    let (n, c, out) = (4, 2, 5);
+    let cfg = crate::small_cfg(EncoderConfig::TensorVm {
+        resolution: n,
+        components: c,
+        out_dim: out,
+        lines: unispine::field::encode::VmLines::Corrected,
+    });
+    let mut field = Field::<f32>::new(&cfg).unwrap();
+    for (i, p) in field.params.iter_mut().enumerate() {
+        *p = i as f32;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("model.npz");
+    model::save(&path, &field).unwrap();
+    let mut npz = ndarray_npy::NpzReader::new(std::fs::File::open(&path).unwrap()).unwrap();
+    let meta: Array1<i64> = npz.by_name("vm_meta").unwrap();
+    assert_eq!(meta.to_vec(), vec![n as i64, c as i64, out as i64, 1]);
+    let planes: ndarray::Array4<f32> = npz.by_name("vm_planes").unwrap();
+    let lines: ndarray::Array3<f32> = npz.by_name("vm_lines").unwrap();
+    let basis: Array2<f32> = npz.by_name("vm_basis").unwrap();
+    assert_eq!(planes.shape(), [3, c, n, n]);
+    assert_eq!(lines.shape(), [3, c, n]);
+    assert_eq!(basis.shape(), [out, 3 * c]);
+    // The parameters in order: planes, lines, basis (row-major), values 0, 1, 2, ...
+    let stored: Vec<f32> = planes
+        .iter()
+        .chain(lines.iter())
+        .chain(basis.iter())
+        .copied()
+        .collect();
+    let want: Vec<f32> = (0..stored.len()).map(|i| i as f32).collect();
+    assert_eq!(stored, want);
+}
