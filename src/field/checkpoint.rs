@@ -289,4 +289,46 @@ mod tests {
         let e = FieldCheckpoint::from_bytes(p, &b, &edited, 10, DS).unwrap_err();
         assert!(e.to_string().contains("config.json changed"), "{e}");
     }
+
+    #[test]
+    fn the_iteration_may_reach_the_schedule_s_end_and_the_time_must_be_a_time() {
+        let p = Path::new("run/checkpoint.bin");
+        let iters = cfg().iterations;
+        let at = |iteration: usize, t: f64| {
+            let mut c = ckpt(10);
+            c.iteration = iteration;
+            c.train_time_s = t;
+            FieldCheckpoint::from_bytes(p, &c.to_bytes(&cfg(), DS), &cfg(), 10, DS)
+        };
+        assert!(at(iters, 0.0).is_ok());
+        let e = at(iters + 1, 1.0).unwrap_err().to_string();
+        assert!(e.contains("iteration") && e.contains("past the run"), "{e}");
+        let e = at(1, -1.0).unwrap_err().to_string();
+        assert!(e.contains("train_time_s"), "{e}");
+        // Not finite: written as JSON null, refused when the header is read.
+        for t in [f64::NAN, f64::INFINITY] {
+            assert!(at(1, t).is_err(), "{t}");
+        }
+    }
+
+    #[test]
+    fn a_field_checkpoint_is_told_from_a_gaussian_one_by_its_first_line() {
+        let b = ckpt(3).to_bytes(&cfg(), DS);
+        assert!(is_field_checkpoint(&b));
+        assert!(!is_field_checkpoint(b"unispine-checkpoint\n...."));
+        assert!(!is_field_checkpoint(&b[..MAGIC.len() - 1]));
+        let dir = tempfile::tempdir().unwrap();
+        let (field, short, other) = (
+            dir.path().join("f.bin"),
+            dir.path().join("s.bin"),
+            dir.path().join("g.bin"),
+        );
+        std::fs::write(&field, &b).unwrap();
+        std::fs::write(&short, &b[..3]).unwrap();
+        std::fs::write(&other, b"unispine-checkpoint\n0123456789abcdef0123456789").unwrap();
+        assert!(file_is_field_checkpoint(&field));
+        assert!(!file_is_field_checkpoint(&short));
+        assert!(!file_is_field_checkpoint(&other));
+        assert!(!file_is_field_checkpoint(&dir.path().join("missing.bin")));
+    }
 }
