@@ -135,3 +135,33 @@ fn a_data_flag_is_replaced_where_given_and_appended_where_not() {
         ["phantom", "--detector", "64"]
     );
 }
+
+#[test]
+fn each_data_point_sets_its_own_condition_s_value_and_the_others_bases() {
+    let p = plan_with(
+        "[[conditions]]\naxis = \"pose\"\non = \"data\"\nflag = \"pose-noise-deg\"\nbase = 0\n\
+         values = [0.1, 0.2]\n\
+         [[conditions]]\naxis = \"det\"\non = \"data\"\nflag = \"detector\"\nbase = 64\n\
+         values = [32]\n",
+    )
+    .unwrap();
+    let args: Vec<Vec<String>> = p
+        .dataset_builds()
+        .into_iter()
+        .map(|d| match d.source {
+            Source::Data(a) => a,
+            other => panic!("{other:?}"),
+        })
+        .collect();
+    let flags = |a: &[String]| {
+        let at = |f: &str| a[a.iter().position(|x| x == f).unwrap() + 1].clone();
+        (at("--pose-noise-deg"), at("--detector"))
+    };
+    let got: Vec<(String, String)> = args.iter().map(|a| flags(a)).collect();
+    let want = [("0", "64"), ("0.1", "64"), ("0.2", "64"), ("0", "32")];
+    assert_eq!(
+        got,
+        want.map(|(a, b)| (a.to_string(), b.to_string())),
+        "{args:?}"
+    );
+}
