@@ -14,6 +14,16 @@ fn leaky(x: f64) -> f64 {
     }
 }
 
+/// `field` saved as a model file in a temporary folder (kept while the first value lives), and
+/// a reader of that file.
+fn saved(field: &Field<f32>) -> (tempfile::TempDir, ndarray_npy::NpzReader<std::fs::File>) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("model.npz");
+    model::save(&path, field).unwrap();
+    let npz = ndarray_npy::NpzReader::new(std::fs::File::open(&path).unwrap()).unwrap();
+    (dir, npz)
+}
+
 #[test]
 fn a_saved_field_evaluates_to_its_density_from_the_file_alone() {
     let bands = 3;
@@ -23,11 +33,7 @@ fn a_saved_field_evaluates_to_its_density_from_the_file_alone() {
     for (i, p) in field.params.iter_mut().enumerate() {
         *p = (((i * 7919) % 1013) as f32 / 1013.0 - 0.5) * 0.9;
     }
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("model.npz");
-    model::save(&path, &field).unwrap();
-
-    let mut npz = ndarray_npy::NpzReader::new(std::fs::File::open(&path).unwrap()).unwrap();
+    let (_dir, mut npz) = saved(&field);
     let meta: Array1<i64> = npz.by_name("mlp_meta").unwrap();
     let skips: Array1<i64> = npz.by_name("skips").unwrap();
     let fb: Array1<i64> = npz.by_name("freq_bands").unwrap();
@@ -112,10 +118,7 @@ fn a_saved_tensor_vm_field_keeps_planes_lines_and_basis_in_place() {
     for (i, p) in field.params.iter_mut().enumerate() {
         *p = i as f32;
     }
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("model.npz");
-    model::save(&path, &field).unwrap();
-    let mut npz = ndarray_npy::NpzReader::new(std::fs::File::open(&path).unwrap()).unwrap();
+    let (_dir, mut npz) = saved(&field);
     let meta: Array1<i64> = npz.by_name("vm_meta").unwrap();
     assert_eq!(meta.to_vec(), vec![n as i64, c as i64, out as i64, 1]);
     let planes: ndarray::Array4<f32> = npz.by_name("vm_planes").unwrap();
