@@ -54,6 +54,19 @@ fn all_presets_adds_each_preset_not_listed_once() {
     }
     assert!(names.contains(&"v"));
     assert_eq!(names.len(), schema.methods.len() + 1, "{names:?}");
+    // A preset listed after `all-presets` is not added twice.
+    let p = with(
+        "seeds = [0]",
+        &format!("methods = [\"{ALL_PRESETS}\", \"3dgs\"]"),
+    )
+    .unwrap();
+    let names: Vec<&str> = p.methods.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(
+        names.iter().filter(|n| **n == "3dgs").count(),
+        1,
+        "{names:?}"
+    );
+    assert_eq!(names.len(), schema.methods.len(), "{names:?}");
 }
 
 #[test]
