@@ -49,7 +49,7 @@ fn each_condition_target_names_the_key_it_was_read_from() {
 }
 
 /// A plan over `3dgs` and `fdk` with the given `[[conditions]]` blocks.
-fn plan_with(conditions: &str) -> crate::error::Result<crate::reproduce::plan::Plan> {
+fn plan_with(conditions: &str) -> Result<super::super::Plan> {
     super::super::tests::parse(&format!(
         "name = \"t\"\niters = 10\nseeds = [0]\nmethods = [\"3dgs\", \"fdk\"]\n\
          [[datasets]]\nname = \"ph\"\ndata = [\"phantom\"]\n{conditions}"
