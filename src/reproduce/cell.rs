@@ -183,3 +183,111 @@ pub fn cells(plan: &Plan) -> Vec<Cell> {
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::reproduce::plan::tests::parse;
+
+    /// `3dgs` and `xgaussian` on one dataset with a data axis of integer values, a budget on
+    /// `3dgs` only, a schedule axis on `3dgs` only and a method axis replacing `3dgs`.
+    const PLAN: &str = "name = \"c\"\niters = 10\nseeds = [0]\nmethods = [\"3dgs\", \"xgaussian\"]\n\
+        [[conditions]]\naxis = \"res\"\non = \"data\"\nflag = \"detector\"\nbase = 32\nvalues = [64]\n\
+        [[conditions]]\naxis = \"budget\"\non = \"train\"\nflag = \"max-gaussians\"\n\
+        methods = [\"3dgs\"]\nbase = 500\nvalues = [100]\n\
+        [[conditions]]\naxis = \"length\"\non = \"train\"\nflag = \"iters\"\n\
+        methods = [\"3dgs\"]\nbase = 20\nvalues = [40]\n\
+        [[conditions]]\naxis = \"preset\"\non = \"method\"\nmethods = [\"3dgs\"]\n\
+        values = [\"3dgs-vanilla\"]\n\
+        [[datasets]]\nname = \"ph\"\ndata = [\"phantom\"]\n";
+
+    /// The cell of `method` at the point labelled `axis=value` (None: the base).
+    fn cell(plan: &Plan, method: &str, at: Option<(&str, &str)>) -> Cell {
+        cells(plan)
+            .into_iter()
+            .find(|c| {
+                let l = plan.point_label(c.point);
+                c.method.name == method && l.as_ref().map(|(a, v)| (a.as_str(), v.as_str())) == at
+            })
+            .unwrap_or_else(|| panic!("no cell {method} at {at:?}"))
+    }
+
+    #[test]
+    fn a_schedule_axis_sets_the_iterations_of_the_methods_it_acts_on_only() {
+        let p = parse(PLAN).unwrap();
+        // Its base value wherever it acts, its value at its own point, the plan's elsewhere.
+        assert_eq!(cell(&p, "3dgs", None).iters(&p), 20);
+        assert_eq!(cell(&p, "3dgs", Some(("length", "40"))).iters(&p), 40);
+        assert_eq!(cell(&p, "xgaussian", None).iters(&p), 10);
+        // A point on a data or a train axis of integer values is not a schedule.
+        assert_eq!(cell(&p, "xgaussian", Some(("res", "64"))).iters(&p), 10);
+        assert_eq!(cell(&p, "3dgs", Some(("res", "64"))).iters(&p), 20);
+        assert_eq!(cell(&p, "3dgs", Some(("budget", "100"))).iters(&p), 20);
+        // Without a schedule axis, a train axis's integer base is not one either.
+        let cut = PLAN.replace("flag = \"iters\"", "flag = \"grad-threshold\"");
+        let q = parse(&cut).unwrap();
+        assert_eq!(cell(&q, "3dgs", None).iters(&q), 10);
+    }
+
+    #[test]
+    fn train_args_carry_each_train_axis_at_its_point_and_its_base_elsewhere() {
+        let p = parse(PLAN).unwrap();
+        let args = |m: &str, at: Option<(&str, &str)>| cell(&p, m, at).train_args(&p).join(" ");
+        assert_eq!(
+            args("3dgs", None),
+            "--method 3dgs --iters 20 --seed 0 --max-gaussians 500"
+        );
+        assert_eq!(
+            args("3dgs", Some(("budget", "100"))),
+            "--method 3dgs --iters 20 --seed 0 --max-gaussians 100"
+        );
+        assert_eq!(
+            args("3dgs", Some(("length", "40"))),
+            "--method 3dgs --iters 40 --seed 0 --max-gaussians 500"
+        );
+        // A data axis is the dataset's, not a flag of training.
+        assert_eq!(
+            args("3dgs", Some(("res", "64"))),
+            "--method 3dgs --iters 20 --seed 0 --max-gaussians 500"
+        );
+        // Axes acting on 3dgs only leave xgaussian alone.
+        assert_eq!(
+            args("xgaussian", None),
+            "--method xgaussian --iters 10 --seed 0"
+        );
+        // The replacing preset runs with its own settings.
+        assert_eq!(
+            args("3dgs", Some(("preset", "3dgs-vanilla"))),
+            "--method 3dgs-vanilla --iters 20 --seed 0"
+        );
+    }
+
+    #[test]
+    fn a_sweep_value_names_the_folder_and_the_label() {
+        let p = parse(
+            "name = \"s\"\niters = 10\nseeds = [3]\nmethods = [\"3dgs\"]\n\
+             [sweep]\nflag = \"train-views\"\nvalues = [5, 10]\n\
+             [[conditions]]\naxis = \"res\"\non = \"data\"\nflag = \"detector\"\nvalues = [64]\n\
+             [[datasets]]\nname = \"ph\"\ndata = [\"phantom\"]\n",
+        )
+        .unwrap();
+        let c = cells(&p);
+        let labels: Vec<String> = c.iter().map(|c| c.label(&p)).collect();
+        assert_eq!(
+            labels,
+            [
+                "ph/3dgs@train-views=5/seed3",
+                "ph/3dgs@train-views=10/seed3",
+                "ph/3dgs@train-views=5@res=64/seed3",
+                "ph/3dgs@train-views=10@res=64/seed3",
+            ]
+        );
+        assert_eq!(
+            c[1].rel_dir(&p),
+            Path::new("runs/ph/3dgs@train-views=10/seed3")
+        );
+        assert!(c[1]
+            .train_args(&p)
+            .ends_with(&["--train-views".into(), "10".into()]));
+    }
+}

@@ -49,11 +49,19 @@ pub fn task_index(given: Option<&str>, n_cells: usize) -> Result<usize> {
 
 /// The cores the cells share: `SLURM_CPUS_PER_TASK` inside a Slurm task, else the machine's.
 pub fn cores() -> usize {
-    std::env::var("SLURM_CPUS_PER_TASK")
-        .ok()
+    cores_of(
+        std::env::var("SLURM_CPUS_PER_TASK").ok().as_deref(),
+        std::thread::available_parallelism().map_or(1, |n| n.get()),
+    )
+}
+
+/// [`cores`] from the variable's text (if set) and the machine's cores: a positive count in
+/// the variable wins.
+fn cores_of(slurm: Option<&str>, machine: usize) -> usize {
+    slurm
         .and_then(|v| v.parse::<usize>().ok())
         .filter(|&n| n > 0)
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .unwrap_or(machine)
 }
 
 /// Write the Slurm job array of `plan` (one task per cell, a dependent collect job) into
@@ -181,5 +189,80 @@ mod tests {
         let one = harness_line(&s, 1);
         assert!(one.contains("1.0 s, 1.00 % of the runs' time"), "{one}");
         assert!(!harness_line(&s, 2).contains('%'));
+    }
+
+    #[test]
+    fn slurm_s_cpus_per_task_wins_when_it_is_a_positive_count() {
+        assert_eq!(cores_of(Some("3"), 8), 3);
+        assert_eq!(cores_of(Some("1"), 8), 1);
+        for v in ["0", "-2", "two", ""] {
+            assert_eq!(cores_of(Some(v), 8), 8, "{v:?}");
+        }
+        assert_eq!(cores_of(None, 5), 5);
+        let machine = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let env = std::env::var("SLURM_CPUS_PER_TASK").ok();
+        assert_eq!(cores(), cores_of(env.as_deref(), machine));
+        assert!(cores() >= 1);
+    }
+
+    /// The array of a plan whose dataset is a ready folder: the datasets are checked (their
+    /// checksums read), the scripts land in `OUT/slurm/` and `submit.sh` is returned.
+    #[test]
+    fn emit_slurm_returns_the_submit_script_it_wrote() {
+        let tmp = tempfile::tempdir().unwrap();
+        let ds = tmp.path().join("ds");
+        std::fs::create_dir_all(&ds).unwrap();
+        for f in ["dataset.json", "train.npy", "test.npy"] {
+            std::fs::write(ds.join(f), f).unwrap();
+        }
+        let text = format!(
+            "name = \"e\"\niters = 10\nseeds = [0, 1, 2]\nmethods = [\"3dgs\"]\n\
+             [[datasets]]\nname = \"d\"\npath = \"{}\"\n",
+            ds.display()
+        );
+        let plan = crate::reproduce::plan::tests::parse(&text).unwrap();
+        let out = tmp.path().join("out");
+        let plan_file = tmp.path().join("e.toml");
+        let opts = RunOptions {
+            out: out.clone(),
+            jobs: 1,
+            bin: PathBuf::from("/opt/unispine/bin/unispine"),
+            base_dir: tmp.path().to_path_buf(),
+            cores: 2,
+            only: None,
+        };
+        let submit = emit_slurm(&plan, plan_file.to_str().unwrap(), &opts, &mut |_| {}).unwrap();
+        assert_eq!(submit, out.join("slurm").join("submit.sh"));
+        let text = std::fs::read_to_string(&submit).unwrap();
+        assert!(text.contains("sbatch"), "{text}");
+        let array = std::fs::read_to_string(out.join("slurm").join("array.sbatch")).unwrap();
+        assert!(array.contains("#SBATCH --array=0-2"), "{array}");
+        assert!(
+            array.contains(&format!(
+                "exec /opt/unispine/bin/unispine reproduce {} --out {} --task",
+                plan_file.display(),
+                out.display()
+            )),
+            "{array}"
+        );
+        // A dataset folder that is not one is refused before any script is written.
+        std::fs::remove_file(ds.join("dataset.json")).unwrap();
+        let out2 = tmp.path().join("out2");
+        let e = emit_slurm(
+            &plan,
+            plan_file.to_str().unwrap(),
+            &RunOptions {
+                out: out2.clone(),
+                ..opts
+            },
+            &mut |_| {},
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("datasets.d") && e.contains("no dataset.json"),
+            "{e}"
+        );
+        assert!(!out2.join("slurm").exists());
     }
 }

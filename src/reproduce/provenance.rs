@@ -90,3 +90,70 @@ impl Machine {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// FNV-1a 64 written from its definition (offset basis 0xcbf29ce484222325, prime
+    /// 0x100000001b3: xor the byte, then multiply).
+    fn fnv(bytes: &[u8]) -> u64 {
+        bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
+            (h ^ b as u64).wrapping_mul(0x0100_0000_01b3)
+        })
+    }
+
+    #[test]
+    fn a_dataset_s_checksum_runs_over_its_three_files_in_order() {
+        let tmp = tempfile::tempdir().unwrap();
+        let d = tmp.path();
+        // train.npy longer than the 1 MiB read block, so that blocks are continued.
+        let train: Vec<u8> = (0..(1u32 << 20) + 77)
+            .map(|i| (i * 7 + i / 251) as u8)
+            .collect();
+        std::fs::write(d.join("dataset.json"), b"{\"n\": 1}").unwrap();
+        std::fs::write(d.join("train.npy"), &train).unwrap();
+        std::fs::write(d.join("test.npy"), b"test").unwrap();
+        let mut all = b"{\"n\": 1}".to_vec();
+        all.extend(&train);
+        all.extend(b"test");
+        assert_eq!(dataset_checksum(d).unwrap(), format!("{:016x}", fnv(&all)));
+        // The files' order counts.
+        std::fs::write(d.join("dataset.json"), b"test").unwrap();
+        std::fs::write(d.join("test.npy"), b"{\"n\": 1}").unwrap();
+        assert_ne!(dataset_checksum(d).unwrap(), format!("{:016x}", fnv(&all)));
+        // A missing file is named.
+        std::fs::remove_file(d.join("test.npy")).unwrap();
+        let e = dataset_checksum(d).unwrap_err().to_string();
+        assert!(e.contains("test.npy"), "{e}");
+    }
+
+    #[test]
+    fn a_config_s_hash_leaves_out_where_its_data_lies() {
+        let tmp = tempfile::tempdir().unwrap();
+        let r = tmp.path();
+        assert_eq!(config_hash(r), None);
+        let put = |t: &str| std::fs::write(r.join("config.json"), t).unwrap();
+        put(r#"{"data": "/a/ds", "iters": 10}"#);
+        let h = config_hash(r).unwrap();
+        assert_eq!(h, format!("{:016x}", fnv(br#"{"iters":10}"#)));
+        put(r#"{"iters": 10, "data": "/b/elsewhere"}"#);
+        assert_eq!(config_hash(r).unwrap(), h);
+        put(r#"{"data": "/a/ds", "iters": 11}"#);
+        assert_ne!(config_hash(r).unwrap(), h);
+        put("not json");
+        assert_eq!(config_hash(r), None);
+    }
+
+    /// In a checkout the build records the commit (hex, `-dirty` when the sources differ);
+    /// outside one, `unknown`.
+    #[test]
+    fn the_commit_is_hex_or_unknown() {
+        let c = git_commit();
+        let hex = c.strip_suffix("-dirty").unwrap_or(c);
+        assert!(
+            c == "unknown" || (hex.len() >= 7 && hex.chars().all(|ch| ch.is_ascii_hexdigit())),
+            "{c:?}"
+        );
+    }
+}

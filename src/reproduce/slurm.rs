@@ -194,4 +194,28 @@ mod tests {
             .contains("--dependency=afterok:\"$array\" --kill-on-invalid-dep=yes collect.sbatch"));
         assert_eq!(sh_quote("it's"), "'it'\\''s'");
     }
+
+    /// The scripts land in `OUT/slurm/`, executable, with the texts [`scripts`] gives; the
+    /// path returned is that of `submit.sh`.
+    #[test]
+    fn write_scripts_leaves_executable_scripts_and_returns_submit() {
+        let tmp = tempfile::tempdir().unwrap();
+        let plan =
+            crate::reproduce::plan::tests::parse(crate::reproduce::holds::tests::PLAN).unwrap();
+        let (bin, out) = (Path::new("/opt/unispine"), tmp.path());
+        let submit = write_scripts(&plan, bin, "h.toml", out, Path::new("/w")).unwrap();
+        assert_eq!(submit, out.join("slurm").join("submit.sh"));
+        let texts = scripts(&plan, bin, "h.toml", out, Path::new("/w")).unwrap();
+        assert_eq!(texts.len(), 3);
+        for (name, text) in texts {
+            let p = out.join("slurm").join(&name);
+            assert_eq!(std::fs::read_to_string(&p).unwrap(), text, "{name}");
+            #[cfg(unix)]
+            {
+                use std::os::unix::fs::PermissionsExt;
+                let mode = std::fs::metadata(&p).unwrap().permissions().mode();
+                assert_eq!(mode & 0o777, 0o755, "{name}");
+            }
+        }
+    }
 }

@@ -386,6 +386,9 @@ pub fn write_all(
 }
 
 #[cfg(test)]
+mod whole;
+
+#[cfg(test)]
 mod tests {
     use super::{pm_sig, provenance, results_part, without_result, Row, WHAT_RUNS};
     use crate::doc::{Block, Doc};
