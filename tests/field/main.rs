@@ -10,6 +10,7 @@ mod golden;
 mod gradcheck;
 mod model_file;
 mod sampling;
+mod settings;
 mod stages;
 mod step_lr;
 
