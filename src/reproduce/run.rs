@@ -555,3 +555,6 @@ pub fn run_plan(
     summary.total_wall_s = t0.elapsed().as_secs_f64();
     Ok(summary)
 }
+
+#[cfg(all(test, unix))]
+mod tests;
