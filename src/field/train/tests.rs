@@ -105,3 +105,62 @@ fn rays_come_from_positive_pixels_or_from_all() {
     assert_eq!(back, cfg);
     assert_eq!(cfg.label(), "intratomo (reduced, all pixels)");
 }
+
+/// Iteration `it` draws from training view `(it - 1) mod views` the first `n_rays` of a
+/// permutation of that view's positive pixels, shuffled by a partial Fisher-Yates with the
+/// ChaCha8 generator of seed `seed ^ 0x0a1f << 48` on stream `2^40 ^ it` (pixel-stream number 1
+/// times 2^40): written out here from that description.
+#[test]
+fn a_batch_is_a_seeded_partial_permutation_of_its_view_s_positive_pixels() {
+    let mut vol = crate::volume::Volume::<f32>::zeros([16, 16, 16], [4.0; 3]);
+    for (i, v) in vol.data.iter_mut().enumerate() {
+        // An uneven blob, so that the three views differ.
+        let (x, y, z) = (i % 16, i / 16 % 16, i / 256);
+        if (5..11).contains(&x) && (6..10).contains(&y) && (4..12).contains(&z) {
+            *v = 0.01 + (x * y) as f32 * 1e-4;
+        }
+    }
+    let opts = GenerateOptions {
+        train_views: 3,
+        test_views: 1,
+        detector: 16,
+        ..Default::default()
+    };
+    let ds = generate(&vol, &opts, &|_, _| {}).unwrap();
+    let mut cfg = FieldConfig::preset("intratomo", 3).unwrap();
+    cfg.n_rays = 7;
+    // Bits shared with the stream constant, so that `^` differs from `|` and `&`.
+    cfg.seed = 0x0a00_0000_0000_0007;
+    let tr = FieldTrainer::new(cfg.clone(), &ds).unwrap();
+    let scale = unit_scale(&ds);
+    let mut drawn = Vec::new();
+    for it in 1..=5usize {
+        let (view, rays, targets) = tr.batch(it);
+        assert_eq!(view, (it - 1) % 3, "iteration {it}");
+        let proj = &ds.train.projections[view];
+        let mut idx: Vec<usize> = (0..proj.data.len())
+            .filter(|&p| proj.data[p] > 0.0)
+            .collect();
+        let mut rng = ChaCha8Rng::seed_from_u64(0x0a00_0000_0000_0007 ^ 0x0a1f_0000_0000_0000);
+        rng.set_stream((1u64 << 40) ^ it as u64);
+        for i in 0..7 {
+            let j = rng.random_range(i..idx.len());
+            idx.swap(i, j);
+        }
+        let cam = ds.train_camera(view);
+        let w = proj.width;
+        let want_rays: Vec<Ray> = idx[..7]
+            .iter()
+            .map(|&p| render::pixel_ray(&cam, p % w, p / w))
+            .collect();
+        let want_targets: Vec<f32> = idx[..7]
+            .iter()
+            .map(|&p| (proj.data[p] as f64 / scale) as f32)
+            .collect();
+        assert_eq!(rays, want_rays, "iteration {it}");
+        assert_eq!(targets, want_targets, "iteration {it}");
+        drawn.push(idx[..7].to_vec());
+    }
+    // Iterations 1 and 4 use the same view and draw other pixels.
+    assert_ne!(drawn[0], drawn[3]);
+}
