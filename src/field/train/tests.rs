@@ -164,3 +164,46 @@ fn a_batch_is_a_seeded_partial_permutation_of_its_view_s_positive_pixels() {
     // Iterations 1 and 4 use the same view and draw other pixels.
     assert_ne!(drawn[0], drawn[3]);
 }
+
+/// A trainer restored from another's checkpoint continues with the same bits; each step reports
+/// PSNR = -10 log10(loss); the evaluated test views are every `eval_stride`-th.
+#[test]
+fn a_restored_trainer_continues_with_the_same_bits() {
+    let ds = dataset();
+    let mut cfg = FieldConfig::preset("naf", 2).unwrap();
+    cfg.hidden_dim = 8;
+    cfg.n_rays = 16;
+    cfg.n_samples = 8;
+    let mut a = FieldTrainer::new(cfg.clone(), &ds).unwrap();
+    for _ in 0..3 {
+        let s = a.step().unwrap();
+        assert_eq!(s.psnr, -10.0 * s.loss.total.log10(), "{s:?}");
+        assert!(s.loss.total > 0.0);
+    }
+    let c = a.checkpoint(1.5, "log");
+    let mut b = FieldTrainer::new(cfg.clone(), &ds).unwrap();
+    assert_ne!(b.field.params, a.field.params);
+    b.restore(&c);
+    assert_eq!(b.iteration, 3);
+    let (sa, sb) = (a.step().unwrap(), b.step().unwrap());
+    assert_eq!(sa.iteration, 4);
+    assert_eq!(sa.loss.total.to_bits(), sb.loss.total.to_bits());
+    let bits = |t: &FieldTrainer| {
+        t.field
+            .params
+            .iter()
+            .map(|p| p.to_bits())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(bits(&a), bits(&b));
+    assert_eq!(a.adam.step, b.adam.step);
+    assert_eq!(a.eval_views(), [0]);
+    let mut five = cfg;
+    five.eval_stride = 5;
+    let mut ds12 = dataset();
+    let t = ds12.test.clone();
+    ds12.test.angles = (0..12).map(|i| i as f64 * 0.1).collect();
+    ds12.test.projections = vec![t.projections[0].clone(); 12];
+    let t12 = FieldTrainer::new(five, &ds12).unwrap();
+    assert_eq!(t12.eval_views(), [0, 5, 10]);
+}

@@ -1,6 +1,7 @@
 //! The harness against a stand-in for `unispine`: a shell script that builds a dataset of three
 //! small files and "trains" by method (`3dgs` completes, `xgaussian` fails with a message,
-//! `unispine` stops once, leaving a checkpoint, and completes when resumed), recording the
+//! `unispine` stops once, leaving a checkpoint, and completes when resumed; any method with
+//! `--iters 13` exits with success before completing), recording the
 //! arguments and `RAYON_NUM_THREADS` it was given. What the harness does with the outcomes
 //! (records, keys, kept cells, resumes, reruns, events) is read back from the folder.
 
@@ -27,6 +28,9 @@ fi
 dir=${out:-$res}
 echo "$all" >> "$dir/calls.txt"
 echo "$RAYON_NUM_THREADS" >> "$dir/rayon.txt"
+case " $all " in
+  *" --iters 13 "*) echo "left early"; exit 0 ;;
+esac
 if [ -n "$res" ]; then
   printf '{"completed": true, "test_psnr": 31.0}' > "$dir/metrics.json"; exit 0
 fi
@@ -247,4 +251,48 @@ fn tail_gives_the_last_non_blank_lines() {
     big.push_str("end\n");
     std::fs::write(&f, &big).unwrap();
     assert_eq!(tail(&f, 1), "end");
+}
+
+/// A stopped cell resumes only from a whole run folder of the same cell; a child that exits
+/// with success before completing is a stopped cell; a dataset folder that lost its files is
+/// built again; a resumed cell's wall time adds the earlier sessions'.
+#[test]
+fn resuming_needs_the_checkpoint_and_the_config() {
+    let tmp = tempfile::tempdir().unwrap();
+    let p = plan(10);
+    // Cells 4 and 5: unispine, seeds 0 and 1, both stopped.
+    let (s, _) = run(&p, &options(tmp.path(), 1, Some(vec![4, 5])));
+    assert_eq!(s.failed, 2);
+    let out = tmp.path().join("out");
+    let cell = |seed: u64| out.join(format!("runs/ph/unispine/seed{seed}"));
+    std::fs::remove_file(cell(0).join("checkpoint.bin")).unwrap();
+    std::fs::remove_file(cell(1).join("config.json")).unwrap();
+    std::fs::remove_file(out.join("datasets/ph/dataset.json")).unwrap();
+    let (s, ev) = run(&p, &options(tmp.path(), 1, Some(vec![4, 5])));
+    assert_eq!((s.trained, s.failed), (0, 2));
+    assert!(ev.contains(&RunEvent::DatasetBuilding { name: "ph".into() }));
+    for seed in 0..2 {
+        // Started afresh: the folder was emptied, one call, and it stopped again.
+        let calls = read(&cell(seed).join("calls.txt"));
+        assert_eq!(calls.lines().count(), 1, "{calls}");
+        assert!(calls.starts_with("--data "), "{calls}");
+        assert_eq!(read_record(&cell(seed)).unwrap().status, Status::Stopped);
+    }
+    // The earlier sessions' wall time, as recorded, is added to a resumed run's.
+    let mut r = read_record(&cell(0)).unwrap();
+    r.wall_s = 100.0;
+    write_json(&cell(0).join("cell.json"), &r).unwrap();
+    let (s, _) = run(&p, &options(tmp.path(), 1, Some(vec![4])));
+    assert_eq!(s.trained, 1);
+    let w = read_record(&cell(0)).unwrap().wall_s;
+    assert!((100.0..160.0).contains(&w), "{w}");
+    // Success without `"completed": true` is a stop, not a finished cell.
+    let (s, _) = run(&plan(13), &options(tmp.path(), 1, Some(vec![0])));
+    assert_eq!((s.trained, s.failed), (0, 1));
+    let r = read_record(&out.join("runs/ph/3dgs/seed0")).unwrap();
+    assert_eq!(r.status, Status::Stopped);
+    assert_eq!(
+        r.error.as_deref(),
+        Some("stopped before the last iteration: left early")
+    );
 }
