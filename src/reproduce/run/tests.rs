@@ -79,6 +79,45 @@ fn read(p: &Path) -> String {
     std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
+/// The events of a run of `n` cells with `jobs` jobs: each cell starts and ends once, numbered
+/// 1..=n, and each end's estimate of the time left is the mean wall time of the cells trained
+/// so far (as their outcomes give it) times the cells left over the jobs, none before a cell
+/// was trained.
+fn check_events(ev: &[RunEvent], n: usize, jobs: usize) {
+    let (mut started, mut ended) = (Vec::new(), Vec::new());
+    let (mut wall, mut trained) = (0.0f64, 0usize);
+    for e in ev {
+        match e {
+            RunEvent::CellStarted { k, n: m, .. } => {
+                assert_eq!(*m, n);
+                started.push(*k);
+            }
+            RunEvent::CellEnded {
+                k,
+                n: m,
+                outcome,
+                eta_s,
+                ..
+            } => {
+                assert_eq!(*m, n);
+                ended.push(*k);
+                if let Outcome::Done { wall_s, .. } = outcome {
+                    wall += wall_s;
+                    trained += 1;
+                }
+                let left = n - ended.len();
+                let want = (trained > 0).then(|| wall / trained as f64 * left as f64 / jobs as f64);
+                assert_eq!(*eta_s, want, "{e:?}");
+            }
+            _ => {}
+        }
+    }
+    started.sort_unstable();
+    ended.sort_unstable();
+    let all: Vec<usize> = (1..=n).collect();
+    assert_eq!((started, ended), (all.clone(), all));
+}
+
 #[test]
 fn cells_are_recorded_kept_resumed_and_rerun_by_their_outcome() {
     let tmp = tempfile::tempdir().unwrap();
@@ -90,6 +129,20 @@ fn cells_are_recorded_kept_resumed_and_rerun_by_their_outcome() {
         (6, 2, 0, 4),
         "{ev:#?}"
     );
+    check_events(&ev, 6, 2);
+    // The summary's wall time is the trained cells' own.
+    let done: f64 = ev
+        .iter()
+        .filter_map(|e| match e {
+            RunEvent::CellEnded {
+                outcome: Outcome::Done { wall_s, .. },
+                ..
+            } => Some(*wall_s),
+            _ => None,
+        })
+        .sum();
+    assert_eq!(s.cells_wall_s, done);
+    assert!(done > 0.0 && s.total_wall_s >= done / 2.0);
     let cell = |m: &str, seed: u64| opts.out.join(format!("runs/ph/{m}/seed{seed}"));
     let rec = |m: &str, seed: u64| read_record(&cell(m, seed)).unwrap();
     let checksum = provenance::dataset_checksum(&opts.out.join("datasets/ph")).unwrap();
@@ -145,6 +198,7 @@ fn cells_are_recorded_kept_resumed_and_rerun_by_their_outcome() {
     std::fs::write(cell("3dgs", 0).join("mark"), "").unwrap();
     let (s, ev) = run(&p, &options(tmp.path(), 1, None));
     assert_eq!((s.cells, s.trained, s.kept, s.failed), (6, 2, 2, 2));
+    check_events(&ev, 6, 1);
     assert!(!ev
         .iter()
         .any(|e| matches!(e, RunEvent::DatasetBuilding { .. })));
