@@ -322,7 +322,7 @@ pub fn missing(rows: &[Row]) -> Vec<&Row> {
 
 #[cfg(test)]
 mod tests {
-    use super::{condition_suffix, describe, gather, groups, method_label, Row};
+    use super::{condition_suffix, describe, gather, groups, method_label, to_csv, Row};
     use crate::reproduce::plan::Plan;
     use std::path::Path;
 
@@ -479,5 +479,68 @@ mod tests {
         assert_eq!(method_label("naf-full", "naf-full"), "naf-full");
         assert_eq!(method_label("unispine", "unispine"), "unispine");
         assert_eq!(method_label("fdk", "fdk"), "fdk");
+    }
+
+    /// RFC 4180 read back, written from the RFC: fields split at commas outside quotes, a
+    /// quoted field's `""` is one quote, records end at a line break outside quotes.
+    fn read_csv(text: &str) -> Vec<Vec<String>> {
+        let (mut recs, mut rec, mut f) = (Vec::new(), Vec::new(), String::new());
+        let (mut quoted, mut chars) = (false, text.chars().peekable());
+        while let Some(c) = chars.next() {
+            match (quoted, c) {
+                (true, '"') if chars.peek() == Some(&'"') => {
+                    chars.next();
+                    f.push('"');
+                }
+                (true, '"') => quoted = false,
+                (true, c) => f.push(c),
+                (false, '"') => quoted = true,
+                (false, ',') => rec.push(std::mem::take(&mut f)),
+                (false, '\n') => {
+                    rec.push(std::mem::take(&mut f));
+                    recs.push(std::mem::take(&mut rec));
+                }
+                (false, c) => f.push(c),
+            }
+        }
+        recs
+    }
+
+    /// Every text survives the CSV (commas, quotes and line breaks quoted) and every float
+    /// reads back to the same bits.
+    #[test]
+    fn results_csv_reads_back_field_for_field() {
+        let row = Row {
+            index: 3,
+            dataset: "ct, crop".into(),
+            method: "say \"hi\"".into(),
+            seed: 7,
+            status: "failed".into(),
+            psnr: Some(0.1 + 0.2),
+            fps: Some(1e-300),
+            cpu_model: Some("AMD EPYC 9R14, 2 cores".into()),
+            error: Some("exit status 3:\nboom, \"bad\"".into()),
+            ..Default::default()
+        };
+        let recs = read_csv(&to_csv(&[row.clone(), Row::default()]));
+        assert_eq!(recs.len(), 3);
+        let head = &recs[0];
+        assert_eq!(head.len(), 30);
+        assert!(recs.iter().all(|r| r.len() == 30), "{recs:?}");
+        let get = |k: &str| {
+            let i = head.iter().position(|h| h == k).unwrap();
+            recs[1][i].clone()
+        };
+        assert_eq!(get("index"), "3");
+        assert_eq!(get("dataset"), "ct, crop");
+        assert_eq!(get("method"), "say \"hi\"");
+        assert_eq!(get("cpu_model"), "AMD EPYC 9R14, 2 cores");
+        assert_eq!(get("error"), "exit status 3:\nboom, \"bad\"");
+        assert_eq!(
+            get("psnr").parse::<f64>().unwrap().to_bits(),
+            (0.1f64 + 0.2).to_bits()
+        );
+        assert_eq!(get("fps").parse::<f64>().unwrap(), 1e-300);
+        assert_eq!((get("ssim"), get("seed")), (String::new(), "7".into()));
     }
 }
