@@ -322,7 +322,7 @@ pub fn missing(rows: &[Row]) -> Vec<&Row> {
 
 #[cfg(test)]
 mod tests {
-    use super::{condition_suffix, describe, gather, groups, method_label, to_csv, Row};
+    use super::{condition_suffix, describe, gather, groups, method_label, missing, to_csv, Row};
     use crate::reproduce::plan::Plan;
     use std::path::Path;
 
@@ -542,5 +542,23 @@ mod tests {
         );
         assert_eq!(get("fps").parse::<f64>().unwrap(), 1e-300);
         assert_eq!((get("ssim"), get("seed")), (String::new(), "7".into()));
+    }
+
+    /// The rows without a test PSNR, in order (what `--collect` lists as missing).
+    #[test]
+    fn missing_rows_are_those_without_a_result() {
+        let r = |index, psnr| Row {
+            index,
+            psnr,
+            ..Default::default()
+        };
+        let rows = [
+            r(0, Some(1.0)),
+            r(1, None),
+            r(2, Some(f64::NAN)),
+            r(3, None),
+        ];
+        let m: Vec<usize> = missing(&rows).iter().map(|r| r.index).collect();
+        assert_eq!(m, [1, 3]);
     }
 }
