@@ -191,5 +191,27 @@ mod tests {
             tested += 1;
         }
         assert!(tested > 1500, "{tested} rays crossed the grid");
+        // Entry and exit exactly on planes of another axis: a plane the chord only touches at
+        // an end is not crossed (unit voxels at the origin; y runs from 1 to 2 while x crosses
+        // the whole grid, so 4 voxels).
+        let unit = Grid {
+            data: &data,
+            n: [4, 4, 4],
+            s: [1.0; 3],
+            lo: [0.0; 3],
+            hi: [4.0; 3],
+        };
+        for (o, d) in [
+            ([-1.0, 0.75, 0.5], [1.0, 0.25, 0.0]),
+            ([5.0, 2.25, 0.5], [-1.0, -0.25, 0.0]),
+        ] {
+            let (t_in, t_out) = clip_line(o, d, unit.lo, unit.hi);
+            assert_eq!((t_in, t_out), (1.0, 5.0));
+            assert_eq!(
+                voxels_crossed(&unit, o, d, t_in, t_out),
+                4,
+                "o {o:?} d {d:?}"
+            );
+        }
     }
 }
