@@ -130,6 +130,11 @@ mod tests {
             ([0.48, 0.6, 0.64], z, [1.0, 1.0], [1.0; 3], false),
             // 0.03 + 0.6 + 1.28 = 1.91 against 2.
             ([0.48, 0.6, 0.64], z, [1.0, 1.0], [1.0, 1.0, 0.5], true),
+            // Signs and sizes that a sum in place of a product, or a product in place of the
+            // division by the voxel size, would order the other way:
+            ([-1.0, 0.0, 0.0], y, [1.0, 17.0], [1.0; 3], false), // 17/16 against 1
+            (x, y, [1.0, 1.0], [0.25, 8.0, 1.0], false),         // 1/4 against 1/8
+            (z, [0.0, -1.0, 0.0], [1.5, 1.0], [1.0; 3], true),   // 1 against 1.5
         ];
         for (k, (u, v, pitch, s, want)) in cases.into_iter().enumerate() {
             cam.rot = [u, v, [0.0; 3]];
