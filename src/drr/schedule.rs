@@ -142,4 +142,40 @@ mod tests {
             assert_eq!(cols_inner(&grid(s), &cam), want, "case {k}");
         }
     }
+
+    /// Every pixel is visited once, a block of `tile` columns at a time (the last block
+    /// ragged), row by row or column by column within the block; its value lands at its place.
+    #[test]
+    fn pixels_are_visited_block_by_block_once_each() {
+        let (w, rows, tile) = (7usize, 3usize, 3usize);
+        for inner in [true, false] {
+            let seen = std::cell::RefCell::new(Vec::new());
+            let mut out = vec![0f32; w * rows];
+            let hits = for_each_pixel(&mut out, w, 10, tile, inner, |c, r| {
+                seen.borrow_mut().push((c, r));
+                ((r * 100 + c) as f32, c % 2 == 0)
+            });
+            let mut want = Vec::new();
+            for c0 in [0, 3, 6] {
+                let cols = c0..(c0 + tile).min(w);
+                if inner {
+                    for r in 10..13 {
+                        want.extend(cols.clone().map(|c| (c, r)));
+                    }
+                } else {
+                    for c in cols {
+                        want.extend((10..13).map(|r| (c, r)));
+                    }
+                }
+            }
+            assert_eq!(seen.into_inner(), want, "columns inner: {inner}");
+            // Columns 0, 2, 4 and 6 hit, on each of the 3 rows.
+            assert_eq!(hits, 12);
+            for r in 0..rows {
+                for c in 0..w {
+                    assert_eq!(out[r * w + c], ((r + 10) * 100 + c) as f32);
+                }
+            }
+        }
+    }
 }
