@@ -330,3 +330,30 @@ pub fn out_act_grad<R: Real>(a: OutAct, z: R, y: R) -> R {
         OutAct::Softplus => R::one() / (R::one() + (-z).exp()),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// PyTorch's `nn.Linear` default: every weight and bias of a layer with `fan_in` inputs
+    /// drawn from U(-1/sqrt(fan_in), 1/sqrt(fan_in)), so the bound is reached closely.
+    #[test]
+    fn initial_parameters_fill_each_layer_s_fan_in_bound() {
+        let m = Mlp::new(16, 32, 4, &[2], OutAct::Sigmoid).unwrap();
+        let p = m.init::<f64>(9);
+        let mut fans = Vec::new();
+        for &(inp, out, off) in &m.shape {
+            let b = (inp as f64).powf(-0.5);
+            let layer = &p[off..off + inp * out + out];
+            let max = layer.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            assert!(
+                max < b && max > 0.9 * b,
+                "fan-in {inp}: max {max} against {b}"
+            );
+            fans.push(inp);
+        }
+        // The skip layer takes the encoding beside the hidden state.
+        assert_eq!(fans, [16, 32, 48, 32]);
+        assert_eq!(m.shape.last().unwrap().2 + 32 + 1, p.len());
+    }
+}
