@@ -16,6 +16,7 @@ use unispine::field::{EncoderConfig, Field, FieldConfig};
 use unispine::simd::Simd;
 
 use crate::common;
+use crate::{dense, vm};
 
 #[test]
 fn field_gradcheck_rows_pass() {
@@ -417,16 +418,6 @@ fn encoders_are_bit_identical_for_1_2_8_threads() {
 #[test]
 fn bad_encoder_settings_name_the_setting() {
     let base = FieldConfig::preset("tensorf", 10).unwrap();
-    let vm = |resolution, components, out_dim| EncoderConfig::TensorVm {
-        resolution,
-        components,
-        out_dim,
-        lines: VmLines::Upstream,
-    };
-    let dense = |resolution, features| EncoderConfig::DenseGrid {
-        resolution,
-        features,
-    };
     for (enc, name, also) in [
         (vm(16, 0, 8), "components", "rank"),
         (vm(0, 4, 8), "resolution", "got 0"),

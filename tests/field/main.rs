@@ -14,6 +14,7 @@ mod settings;
 mod stages;
 mod step_lr;
 
+use unispine::field::encode::VmLines;
 use unispine::field::{EncoderConfig, FieldConfig};
 
 /// A small NAF field for the tests: 8 hidden units, 4 layers with a skip at 2, 6 samples a ray.
@@ -25,4 +26,22 @@ fn small_cfg(encoder: EncoderConfig) -> FieldConfig {
     c.skips = vec![2];
     c.n_samples = 6;
     c
+}
+
+/// A TensoRF VM encoder with the upstream line layout.
+fn vm(resolution: usize, components: usize, out_dim: usize) -> EncoderConfig {
+    EncoderConfig::TensorVm {
+        resolution,
+        components,
+        out_dim,
+        lines: VmLines::Upstream,
+    }
+}
+
+/// A dense-grid encoder.
+fn dense(resolution: usize, features: usize) -> EncoderConfig {
+    EncoderConfig::DenseGrid {
+        resolution,
+        features,
+    }
 }

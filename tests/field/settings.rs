@@ -1,10 +1,9 @@
 //! `FieldConfig`: every range `validate` checks, at both of its endpoints (the last value
 //! refused and the first accepted), the presets' schedule arithmetic, and the names tables use.
 
-use unispine::field::encode::VmLines;
 use unispine::field::{EncoderConfig, FieldConfig, RayPixels, MAX_GRID_PARAMS, MAX_ITERATIONS};
 
-use super::small_cfg;
+use super::{dense, small_cfg, vm};
 
 fn base() -> FieldConfig {
     small_cfg(EncoderConfig::Frequency { bands: 2 })
@@ -76,16 +75,6 @@ fn every_encoder_size_is_checked_at_both_ends() {
         features,
         table_size,
         base_resolution,
-    };
-    let vm = |resolution, components, out_dim| EncoderConfig::TensorVm {
-        resolution,
-        components,
-        out_dim,
-        lines: VmLines::Upstream,
-    };
-    let dense = |resolution, features| EncoderConfig::DenseGrid {
-        resolution,
-        features,
     };
     let cases: Vec<(EncoderConfig, bool, &str)> = vec![
         (EncoderConfig::Frequency { bands: 30 }, true, ""),
