@@ -13,13 +13,18 @@ fn dataset() -> Dataset {
             }
         }
     }
+    views_of(&vol, 2)
+}
+
+/// `train_views` training views and one test view of `vol` on a 16 x 16 detector.
+fn views_of(vol: &crate::volume::Volume<f32>, train_views: usize) -> Dataset {
     let opts = GenerateOptions {
-        train_views: 2,
+        train_views,
         test_views: 1,
         detector: 16,
         ..Default::default()
     };
-    generate(&vol, &opts, &|_, _| {}).unwrap()
+    generate(vol, &opts, &|_, _| {}).unwrap()
 }
 
 /// The dataset's units per (metre x normalised value): 1000 mm per metre times the volume's
@@ -120,13 +125,7 @@ fn a_batch_is_a_seeded_partial_permutation_of_its_view_s_positive_pixels() {
             *v = 0.01 + (x * y) as f32 * 1e-4;
         }
     }
-    let opts = GenerateOptions {
-        train_views: 3,
-        test_views: 1,
-        detector: 16,
-        ..Default::default()
-    };
-    let ds = generate(&vol, &opts, &|_, _| {}).unwrap();
+    let ds = views_of(&vol, 3);
     let mut cfg = FieldConfig::preset("intratomo", 3).unwrap();
     cfg.n_rays = 7;
     // Bits shared with the stream constant, so that `^` differs from `|` and `&`.
