@@ -210,7 +210,7 @@ mod tests {
     #[test]
     fn emit_slurm_returns_the_submit_script_it_wrote() {
         let tmp = tempfile::tempdir().unwrap();
-        let ds = crate::reproduce::plan::tests::ready_folder(tmp.path());
+        let ds = crate::reproduce::provenance::tests::ready_folder(tmp.path());
         let text = format!(
             "name = \"e\"\niters = 10\nseeds = [0, 1, 2]\nmethods = [\"3dgs\"]\n\
              [[datasets]]\nname = \"d\"\npath = \"{}\"\n",

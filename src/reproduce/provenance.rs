@@ -92,8 +92,19 @@ impl Machine {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+
+    /// A dataset folder `parent/ds` as a plan's `path` may name it (the three files whose bytes
+    /// the checksum reads; their content is not a dataset's), for the harness modules' tests.
+    pub(crate) fn ready_folder(parent: &Path) -> std::path::PathBuf {
+        let ds = parent.join("ds");
+        std::fs::create_dir_all(&ds).unwrap();
+        for f in ["dataset.json", "train.npy", "test.npy"] {
+            std::fs::write(ds.join(f), f).unwrap();
+        }
+        ds
+    }
 
     /// FNV-1a 64 written from its definition (offset basis 0xcbf29ce484222325, prime
     /// 0x100000001b3: xor the byte, then multiply).

@@ -11,17 +11,6 @@ pub(crate) fn parse(t: &str) -> Result<Plan> {
     Plan::parse(t, Path::new("p.toml"), &dir, &TrainSchema::of_train())
 }
 
-/// A dataset folder `parent/ds` as a plan's `path` may name it (the three files whose bytes
-/// the checksum reads; their content is not a dataset's), for the harness modules' tests.
-pub(crate) fn ready_folder(parent: &Path) -> std::path::PathBuf {
-    let ds = parent.join("ds");
-    std::fs::create_dir_all(&ds).unwrap();
-    for f in ["dataset.json", "train.npy", "test.npy"] {
-        std::fs::write(ds.join(f), f).unwrap();
-    }
-    ds
-}
-
 const OK: &str = "name = \"t\"\niters = 10\nseeds = [0, 1]\nmethods = [\"unispine\", \"v\"]\n\
                   [[datasets]]\nname = \"ph\"\ndata = [\"phantom\", \"--size\", \"16\"]\n\
                   [variants.v]\nbase = \"xgaussian\"\ncolor = \"rirf-paper\"\n";

@@ -268,7 +268,7 @@ fn a_missing_binary_is_a_failed_cell_that_says_so() {
     let tmp = tempfile::tempdir().unwrap();
     let mut o = options(tmp.path(), 1, Some(vec![0]));
     // A dataset folder in place, so only the training child is missing.
-    let ds = crate::reproduce::plan::tests::ready_folder(tmp.path());
+    let ds = crate::reproduce::provenance::tests::ready_folder(tmp.path());
     let p = parse(&format!(
         "name = \"f\"\niters = 10\nseeds = [0]\nmethods = [\"3dgs\"]\n\
          [[datasets]]\nname = \"ph\"\npath = \"{}\"\n",
