@@ -144,7 +144,8 @@ mod tests {
     }
 
     /// Every pixel is visited once, a block of `tile` columns at a time (the last block
-    /// ragged), row by row or column by column within the block; its value lands at its place.
+    /// ragged), row by row or column by column within the block; its value lands at its place;
+    /// [`tile_order`] lists the same pixels in the same order.
     #[test]
     fn pixels_are_visited_block_by_block_once_each() {
         let (w, rows, tile) = (7usize, 3usize, 3usize);
@@ -169,6 +170,10 @@ mod tests {
                 }
             }
             assert_eq!(seen.into_inner(), want, "columns inner: {inner}");
+            // The lane paths' order, rows counted from the band's first.
+            let order: Vec<_> = tile_order(w, rows, tile, inner).collect();
+            let want_in_band: Vec<_> = want.iter().map(|&(c, r)| (c, r - 10)).collect();
+            assert_eq!(order, want_in_band, "tile_order, columns inner: {inner}");
             // Columns 0, 2, 4 and 6 hit, on each of the 3 rows.
             assert_eq!(hits, 12);
             for r in 0..rows {
