@@ -11,6 +11,7 @@ use unispine::field::train::{loss_and_grad, Sampling};
 
 use crate::small_cfg;
 use unispine::field::{EncoderConfig, Field, FieldConfig};
+use unispine::simd::Simd;
 
 /// Relative error of a parameter group: `|analytic - fd| / |fd|` (2-norms over the group).
 #[derive(Default)]
@@ -107,7 +108,7 @@ fn hash_grid_matches_central_differences() {
         s
     };
     let mut g = vec![0.0; h.n_params()];
-    h.backward(&pts, &gout, od, 0, &mut g);
+    h.backward(Simd::active(), &pts, &gout, od, 0, &mut g);
     let eps = 1e-6;
     let mut grp = Group::default();
     let mut touched = 0;

@@ -16,6 +16,7 @@
 use rayon::prelude::*;
 
 use crate::real::Real;
+use crate::simd::Simd;
 
 /// Points whose corners are computed before their table entries are read or written: the
 /// loads of a chunk do not wait on one another's corner arithmetic, so their cache misses
@@ -72,7 +73,7 @@ impl HashGrid {
     }
 
     /// The 8 corner entries (level-relative) and trilinear weights of point `x` at level `l`.
-    #[inline]
+    #[inline(always)]
     pub fn corners<R: Real>(&self, x: [R; 3], l: usize) -> ([usize; 8], [R; 8]) {
         let bound = R::c(self.bound);
         let r = (self.base << l) as u64;
@@ -152,8 +153,22 @@ impl HashGrid {
 
     /// Encode a block of points (`out`: `L * F` values per point), level after level: the
     /// samples of a block touch one level's table at a time, which then stays in cache (the
-    /// values are those of [`HashGrid::encode`], bit for bit).
-    pub fn encode_block<R: Real>(&self, table: &[R], xs: &[[R; 3]], out: &mut [R]) {
+    /// values are those of [`HashGrid::encode`], bit for bit), compiled for the instruction set
+    /// `simd` (or the widest supported narrower one; the same operations, so the same bits).
+    pub fn encode_block<R: Real>(&self, simd: Simd, table: &[R], xs: &[[R; 3]], out: &mut [R]) {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `or_narrower` returns a path the CPU supports.
+        match simd.or_narrower() {
+            Simd::Avx512 => return unsafe { encode_block_avx512(self, table, xs, out) },
+            Simd::Avx2 => return unsafe { encode_block_avx2(self, table, xs, out) },
+            Simd::Scalar => {}
+        }
+        let _ = simd;
+        self.encode_block_body(table, xs, out)
+    }
+
+    #[inline(always)]
+    fn encode_block_body<R: Real>(&self, table: &[R], xs: &[[R; 3]], out: &mut [R]) {
         let nf = self.features;
         let ed = self.levels * nf;
         let mut cw = [([0usize; 8], [R::zero(); 8]); CHUNK];
@@ -162,6 +177,7 @@ impl HashGrid {
             for (xc, oc) in xs.chunks(CHUNK).zip(out.chunks_mut(CHUNK * ed)) {
                 for (v, &x) in cw.iter_mut().zip(xc) {
                     *v = self.corners(x, l);
+                    prefetch_corners(lt, &v.0, nf);
                 }
                 for ((idx, w), o) in cw.iter().zip(oc.chunks_exact_mut(ed)) {
                     for ch in 0..nf {
@@ -177,9 +193,11 @@ impl HashGrid {
     }
 
     /// Accumulate the table gradient of `sum g . encode(x)` over the points `xs`, with
-    /// `g_out[n * g_stride + g_off ..]` the gradient of point `n`'s encoding.
+    /// `g_out[n * g_stride + g_off ..]` the gradient of point `n`'s encoding; the levels in
+    /// parallel, each compiled for the instruction set `simd` as [`HashGrid::encode_block`].
     pub fn backward<R: Real>(
         &self,
+        simd: Simd,
         xs: &[[R; 3]],
         g_out: &[R],
         g_stride: usize,
@@ -195,24 +213,84 @@ impl HashGrid {
             slices.push(a);
             rest = b;
         }
+        let simd = simd.or_narrower();
         slices.into_par_iter().enumerate().for_each(|(l, gl)| {
-            let mut cw = [([0usize; 8], [R::zero(); 8]); CHUNK];
-            for (k, xc) in xs.chunks(CHUNK).enumerate() {
-                for (v, &x) in cw.iter_mut().zip(xc) {
-                    *v = self.corners(x, l);
-                }
-                for (j, (idx, w)) in cw.iter().take(xc.len()).enumerate() {
-                    let n = k * CHUNK + j;
-                    let g = &g_out[n * g_stride + g_off + l * nf..][..nf];
-                    for c in 0..8 {
-                        for ch in 0..nf {
-                            gl[idx[c] * nf + ch] += w[c] * g[ch];
-                        }
+            let g = (g_out, g_stride, g_off);
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: `or_narrower` returned a path the CPU supports.
+            match simd {
+                Simd::Avx512 => return unsafe { scatter_level_avx512(self, l, xs, g, gl) },
+                Simd::Avx2 => return unsafe { scatter_level_avx2(self, l, xs, g, gl) },
+                Simd::Scalar => {}
+            }
+            self.scatter_level(l, xs, g, gl)
+        });
+    }
+
+    /// Level `l`'s share of [`HashGrid::backward`] into its gradient slice `gl`, the points in
+    /// order; `g` is (`g_out`, `g_stride`, `g_off`).
+    #[inline(always)]
+    fn scatter_level<R: Real>(
+        &self,
+        l: usize,
+        xs: &[[R; 3]],
+        (g_out, g_stride, g_off): (&[R], usize, usize),
+        gl: &mut [R],
+    ) {
+        let nf = self.features;
+        let mut cw = [([0usize; 8], [R::zero(); 8]); CHUNK];
+        for (k, xc) in xs.chunks(CHUNK).enumerate() {
+            for (v, &x) in cw.iter_mut().zip(xc) {
+                *v = self.corners(x, l);
+                prefetch_corners(gl, &v.0, nf);
+            }
+            for (j, (idx, w)) in cw.iter().take(xc.len()).enumerate() {
+                let n = k * CHUNK + j;
+                let g = &g_out[n * g_stride + g_off + l * nf..][..nf];
+                for c in 0..8 {
+                    for ch in 0..nf {
+                        gl[idx[c] * nf + ch] += w[c] * g[ch];
                     }
                 }
             }
-        });
+        }
     }
+}
+
+/// Asks the CPU to bring the cache lines of the corner entries `idx` of a level's table `lt`
+/// (`nf` values each) into the cache: a hint, it changes no value. Corners come in x pairs
+/// whose entries are neighbours, so every other one is enough.
+#[inline(always)]
+fn prefetch_corners<R>(lt: &[R], idx: &[usize; 8], nf: usize) {
+    #[cfg(target_arch = "x86_64")]
+    for c in (0..8).step_by(2) {
+        // SAFETY: a prefetch reads nothing and never faults, whatever the address.
+        #[allow(unused_unsafe)]
+        unsafe {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            _mm_prefetch::<_MM_HINT_T0>(lt.as_ptr().wrapping_add(idx[c] * nf).cast());
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (lt, idx, nf);
+}
+
+crate::simd::wide_kernels! {
+    unsafe fn [R: Real](h: &HashGrid, table: &[R], xs: &[[R; 3]], out: &mut [R]);
+    encode_block_avx2 => { h.encode_block_body(table, xs, out) }
+    encode_block_avx512 => { h.encode_block_body(table, xs, out) }
+}
+
+crate::simd::wide_kernels! {
+    unsafe fn [R: Real](
+        h: &HashGrid,
+        l: usize,
+        xs: &[[R; 3]],
+        g: (&[R], usize, usize),
+        gl: &mut [R],
+    );
+    scatter_level_avx2 => { h.scatter_level(l, xs, g, gl) }
+    scatter_level_avx512 => { h.scatter_level(l, xs, g, gl) }
 }
 
 #[cfg(test)]
@@ -232,9 +310,9 @@ mod tests {
         assert_eq!(g.n_params(), 14_262_438);
     }
 
-    #[test]
-    fn block_encode_is_point_encode_bit_for_bit() {
-        // 4 levels (dense and hashed), 150 points: two full chunks and a partial one.
+    /// 4 levels (dense and hashed) and 150 points (two full chunks and a partial one), a
+    /// table without structure.
+    fn scene() -> (HashGrid, Vec<f32>, Vec<[f32; 3]>) {
         let g = HashGrid::new(4, 2, 10, 4, 0.5);
         let table: Vec<f32> = (0..g.n_params())
             .map(|i| ((i * 7919 % 1000) as f32 - 500.0) * 1e-3)
@@ -245,18 +323,56 @@ mod tests {
                 [t - 0.5, 0.4 - 0.8 * t * t, (7.0 * t).sin() * 0.45]
             })
             .collect();
+        (g, table, xs)
+    }
+
+    fn bits(v: &[f32]) -> Vec<u32> {
+        v.iter().map(|v| v.to_bits()).collect()
+    }
+
+    #[test]
+    fn block_encode_is_point_encode_bit_for_bit_on_every_path() {
+        let (g, table, xs) = scene();
         let ed = g.out_dim();
-        let mut block = vec![f32::NAN; xs.len() * ed];
-        g.encode_block(&table, &xs, &mut block);
         let mut one = vec![f32::NAN; ed];
+        for simd in Simd::supported_paths() {
+            let mut block = vec![f32::NAN; xs.len() * ed];
+            g.encode_block(simd, &table, &xs, &mut block);
+            for (n, &x) in xs.iter().enumerate() {
+                g.encode(&table, x, &mut one);
+                let got = bits(&block[n * ed..(n + 1) * ed]);
+                assert_eq!(got, bits(&one), "{simd:?}, point {n}");
+            }
+        }
+    }
+
+    /// The scatter on every path against the sum written point by point, corner by corner, in
+    /// the points' order (the order the level-parallel scatter keeps), from a non-zero start.
+    #[test]
+    fn scatter_is_the_point_by_point_sum_on_every_path() {
+        let (g, _, xs) = scene();
+        let ed = g.out_dim();
+        let (stride, off) = (ed + 3, 2);
+        let g_out: Vec<f32> = (0..xs.len() * stride)
+            .map(|i| ((i * 104_729 % 997) as f32 - 498.0) * 1e-2)
+            .collect();
+        let start: Vec<f32> = (0..g.n_params()).map(|i| (i % 13) as f32 * 0.25).collect();
+        let mut want = start.clone();
         for (n, &x) in xs.iter().enumerate() {
-            g.encode(&table, x, &mut one);
-            let want: Vec<u32> = one.iter().map(|v| v.to_bits()).collect();
-            let got: Vec<u32> = block[n * ed..(n + 1) * ed]
-                .iter()
-                .map(|v| v.to_bits())
-                .collect();
-            assert_eq!(got, want, "point {n}");
+            for l in 0..g.levels {
+                let (idx, w) = g.corners(x, l);
+                for c in 0..8 {
+                    for ch in 0..2 {
+                        let e = (g.offsets[l] + idx[c]) * 2 + ch;
+                        want[e] += w[c] * g_out[n * stride + off + l * 2 + ch];
+                    }
+                }
+            }
+        }
+        for simd in Simd::supported_paths() {
+            let mut got = start.clone();
+            g.backward(simd, &xs, &g_out, stride, off, &mut got);
+            assert_eq!(bits(&got), bits(&want), "{simd:?}");
         }
     }
 

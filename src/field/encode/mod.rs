@@ -64,7 +64,7 @@ impl Encoder {
     /// one matrix product; same values).
     pub fn encode_block<R: Real>(&self, simd: Simd, params: &[R], xs: &[[R; 3]], out: &mut [R]) {
         match self {
-            Encoder::HashGrid(h) => h.encode_block(params, xs, out),
+            Encoder::HashGrid(h) => h.encode_block(simd, params, xs, out),
             Encoder::TensorVm(v) => v.encode_block(simd, params, xs, out),
             _ => {
                 let e = self.out_dim();
@@ -92,7 +92,7 @@ impl Encoder {
     ) {
         match self {
             Encoder::Frequency(_) => {}
-            Encoder::HashGrid(h) => h.backward(xs, g_out, g_stride, g_off, grad),
+            Encoder::HashGrid(h) => h.backward(simd, xs, g_out, g_stride, g_off, grad),
             Encoder::TensorVm(v) => v.backward(simd, params, xs, g_out, g_stride, g_off, grad),
             Encoder::DenseGrid(d) => d.backward(xs, g_out, g_stride, g_off, grad),
         }
