@@ -8,3 +8,4 @@ mod analytic;
 mod cli;
 mod simd;
 mod trilinear_step;
+mod views;
