@@ -214,5 +214,39 @@ mod tests {
         // On the lower face: inside.
         let (t0, t1) = clip_line([-5.0, 0.0, 0.5], [1.0, 0.0, 0.0], [0.0; 3], [1.0; 3]);
         assert!(t1 > t0);
+        // Parallel to x and y, inside both slabs, outside the z one (either side): empty.
+        for z in [-0.5, 1.0, 1.5] {
+            let (t0, t1) = clip_line([0.5, 0.5, z], [0.0, 0.0, 0.0], [0.0; 3], [1.0; 3]);
+            assert!(t1 <= t0, "z = {z}");
+        }
+        // Parallel to z, inside the x slab at its lower face, outside the y slab: empty.
+        let (t0, t1) = clip_line([0.0, 1.0, -3.0], [0.0, 0.0, 1.0], [0.0; 3], [1.0; 3]);
+        assert!(t1 <= t0);
+    }
+
+    /// A cone-beam ray starts at its source (t >= 0), a parallel-beam ray is the whole line;
+    /// a ray touching the box at one corner only (t_near = t_far) misses it.
+    #[test]
+    fn clip_ray_cone_from_the_source_parallel_whole_line() {
+        let geo = ConeBeam::centred([4, 4], [1.0, 1.0], [2, 2, 2], [1.0; 3]);
+        let mut cam = geo.camera(0.0);
+        let (lo, hi) = ([0.0; 3], [2.0; 3]);
+        // A source inside the box, looking along +x.
+        let (o, d) = ([0.5, 1.0, 1.0], [1.0, 0.0, 0.0]);
+        cam.mode = Mode::Cone;
+        assert_eq!(clip_ray(&cam, o, d, lo, hi), Some((0.0, 1.5)));
+        cam.mode = Mode::Parallel;
+        assert_eq!(clip_ray(&cam, o, d, lo, hi), Some((-0.5, 1.5)));
+        // The box behind a cone-beam source: nothing; along the parallel line: all of it.
+        let o = [3.0, 1.0, 1.0];
+        assert_eq!(clip_ray(&cam, o, d, lo, hi), Some((-3.0, -1.0)));
+        cam.mode = Mode::Cone;
+        assert_eq!(clip_ray(&cam, o, d, lo, hi), None);
+        // Through the corner (2, 2) only: x in [0, 2], y in [2, 4] for t.
+        for mode in [Mode::Cone, Mode::Parallel] {
+            cam.mode = mode;
+            let touch = clip_ray(&cam, [0.0, 4.0, 1.0], [1.0, -1.0, 0.0], lo, hi);
+            assert_eq!(touch, None, "{mode:?}");
+        }
     }
 }
