@@ -224,6 +224,59 @@ mod tests {
         assert!(t1 <= t0);
     }
 
+    /// The geometry's grid fields against the volume's, each at a tolerance it must pass and
+    /// one it must fail: dVoxel relative to the voxel size (1e-6), offOrigin relative to the
+    /// extent (1e-6 x 100 voxels x 2 mm = 2e-4 mm); a voxel size that is zero, negative or not
+    /// finite is named.
+    #[test]
+    fn check_grid_tolerances_and_spacing() {
+        let vol = Volume::<f32>::zeros([100, 3, 2], [2.0, 1.0, 1.0]);
+        let geo = ConeBeam::centred([4, 4], [1.0, 1.0], vol.dims, vol.spacing);
+        let field = |g: &ConeBeam, v: &Volume<f32>| match check_grid(v, g) {
+            Ok(()) => String::new(),
+            Err(e) => e.to_string(),
+        };
+        assert_eq!(field(&geo, &vol), "");
+        for (dv, ok) in [(1.5e-6, true), (2.5e-6, false)] {
+            let mut g = geo.clone();
+            g.d_voxel[0] += dv;
+            let e = field(&g, &vol);
+            assert_eq!(e.is_empty(), ok, "dVoxel off by {dv}: {e}");
+            assert!(ok || e.contains("dVoxel[0]"), "{e}");
+        }
+        for (d, ok) in [(1.5e-4, true), (-1.5e-4, true), (2.5e-4, false)] {
+            let mut g = geo.clone();
+            g.off_origin[0] += d;
+            let e = field(&g, &vol);
+            assert_eq!(e.is_empty(), ok, "offOrigin off by {d}: {e}");
+            assert!(ok || e.contains("offOrigin[0]"), "{e}");
+        }
+        for bad in [0.0, -1.0, f64::INFINITY, f64::NAN] {
+            let mut v = vol.clone();
+            v.spacing[1] = bad;
+            let mut g = geo.clone();
+            g.d_voxel[1] = bad;
+            let e = field(&g, &v);
+            assert!(e.contains("volume spacing[1]"), "spacing {bad}: {e}");
+        }
+    }
+
+    /// A volume with no finite voxel at all is refused (the parallel scan finds the chunk that
+    /// holds a non-finite value, not one that holds a finite one), as is a single NaN in the
+    /// second chunk, named by its voxel.
+    #[test]
+    fn non_finite_voxels_are_found_by_the_parallel_scan() {
+        let mut vol = Volume::<f32>::zeros([256, 256, 3], [1.0; 3]);
+        assert!(check_finite_par(&vol).is_ok());
+        vol.data.iter_mut().for_each(|v| *v = f32::NAN);
+        assert!(check_finite_par(&vol).is_err());
+        let mut vol = Volume::<f32>::zeros([256, 256, 3], [1.0; 3]);
+        let idx = (1 << 16) + 5 * 256 + 7;
+        vol.data[idx] = f32::INFINITY;
+        let e = check_finite_par(&vol).unwrap_err().to_string();
+        assert!(e.contains("(7, 5, 1)"), "{e}");
+    }
+
     /// A cone-beam ray starts at its source (t >= 0), a parallel-beam ray is the whole line;
     /// a ray touching the box at one corner only (t_near = t_far) misses it.
     #[test]

@@ -335,6 +335,30 @@ pub fn out_act_grad<R: Real>(a: OutAct, z: R, y: R) -> R {
 mod tests {
     use super::*;
 
+    /// Softplus where `e^v` overflows: `v` itself (f32 from 88.7, f64 from 709.8), and the
+    /// closed form `v + ln(1 + e^-v)` where it does not; LeakyReLU's slope at 0 is the negative
+    /// side's, as PyTorch's `leaky_relu` backward (`x > 0 ? g : g * slope`).
+    #[test]
+    fn output_activations_at_their_edges() {
+        for v in [100.0f32, 1e30] {
+            assert_eq!(out_act(OutAct::Softplus, v), v);
+        }
+        for v in [1000.0f64, 1e300] {
+            assert_eq!(out_act(OutAct::Softplus, v), v);
+        }
+        for v in [-30.0f64, -5.0, 0.0, 3.0, 19.5] {
+            let want = v.max(0.0) + (-v.abs()).exp().ln_1p();
+            let got = out_act(OutAct::Softplus, v);
+            assert!(
+                (got - want).abs() <= 1e-15 * want.max(1e-300),
+                "{v}: {got} {want}"
+            );
+        }
+        assert_eq!(out_act_grad(OutAct::LeakyRelu, 0.0f64, 0.0), SLOPE);
+        assert_eq!(out_act_grad(OutAct::LeakyRelu, 1e-300f64, 1e-300), 1.0);
+        assert_eq!(out_act(OutAct::LeakyRelu, -2.0f64), -2.0 * SLOPE);
+    }
+
     /// PyTorch's `nn.Linear` default: every weight and bias of a layer with `fan_in` inputs
     /// drawn from U(-1/sqrt(fan_in), 1/sqrt(fan_in)), so the bound is reached closely.
     #[test]
