@@ -404,3 +404,22 @@ fn elementwise_passes_on_an_empty_block_do_nothing() {
         }
     }
 }
+
+/// A layer with no inputs (inner dimension 0): every output row is the bias, on every path
+/// and for f32 (the blocked kernel) and f64.
+#[test]
+fn a_product_with_no_inner_dimension_is_the_bias_per_row() {
+    let (n, out) = (5, 3);
+    let b = [0.5f32, -1.25, 2.0];
+    for simd in Simd::supported_paths() {
+        let mut z = vec![f32::NAN; n * out];
+        gemm::forward(simd, &[], &[], &b, n, 0, out, &mut z);
+        let want: Vec<f32> = (0..n).flat_map(|_| b).collect();
+        assert_eq!(z, want, "{simd:?}");
+        let b64 = b.map(f64::from);
+        let mut z = vec![f64::NAN; n * out];
+        gemm::forward(simd, &[], &[], &b64, n, 0, out, &mut z);
+        let want: Vec<f64> = (0..n).flat_map(|_| b64).collect();
+        assert_eq!(z, want, "{simd:?} f64");
+    }
+}
