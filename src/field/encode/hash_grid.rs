@@ -11,7 +11,9 @@
 //! Backward: `dT_l[idx_c] += w_c g_l` per corner. The scatter is done level by level (levels in
 //! parallel, the samples of a level in order), so the gradient is bit-identical for any
 //! thread count and no atomics are needed. Forward over a block and backward both run one level
-//! at a time and compute the corners of a chunk of points before touching the table.
+//! at a time and compute the corners of a chunk of points before touching the table, asking the
+//! CPU to fetch their cache lines as they go; both are compiled for each instruction set of
+//! [`crate::simd`] (the same operations, so the same bits on every path).
 
 use rayon::prelude::*;
 
@@ -167,6 +169,7 @@ impl HashGrid {
         self.encode_block_body(table, xs, out)
     }
 
+    /// The body of [`HashGrid::encode_block`], compiled into each instruction set's copy.
     #[inline(always)]
     fn encode_block_body<R: Real>(&self, table: &[R], xs: &[[R; 3]], out: &mut [R]) {
         let nf = self.features;
