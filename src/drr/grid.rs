@@ -277,6 +277,30 @@ mod tests {
         assert!(e.contains("(7, 5, 1)"), "{e}");
     }
 
+    /// The vector kernels take every f32 grid on a vector path (their speed is the point of
+    /// them; the per-ray loop would give the same bits), never an f64 one or the scalar path.
+    #[test]
+    fn vector_paths_take_f32_grids() {
+        let data = [0.5f32; 8];
+        for simd in [Simd::Avx2, Simd::Avx512] {
+            assert_eq!(
+                lane_data(simd, &data).map(<[f32]>::len),
+                Some(8),
+                "{simd:?}"
+            );
+            let mut out = [0.0f32; 4];
+            let grid = Grid::unit(&data, [2, 2, 2]);
+            let (g, o) = lanes_f32(simd, &grid, &mut out).expect("an f32 grid");
+            assert_eq!(
+                (g.data.len(), g.n, g.s, g.lo, g.hi),
+                (8, [2; 3], [1.0; 3], [0.0; 3], [2.0; 3])
+            );
+            assert_eq!(o.len(), 4);
+            assert!(lane_data(simd, &[0.5f64; 8]).is_none(), "{simd:?} f64");
+        }
+        assert!(lane_data(Simd::Scalar, &data).is_none());
+    }
+
     /// A cone-beam ray starts at its source (t >= 0), a parallel-beam ray is the whole line;
     /// a ray touching the box at one corner only (t_near = t_far) misses it.
     #[test]
