@@ -72,7 +72,7 @@ pub(super) fn trilinear_band(
 ) -> usize {
     let rows = out.len() / w;
     let mut hits = 0;
-    let wide = simd == Simd::Avx512 && march == MarchLanes::Sixteen;
+    let wide = sixteen_lanes(simd, march);
     let (tile_rows, tile_cols) = if wide { LANE_TILE_16 } else { LANE_TILE };
     let mut plans = Vec::with_capacity(tile_rows * tile_cols);
     let mut inner = [0.0f32; lanes::MAXW];
@@ -106,13 +106,10 @@ pub(super) fn trilinear_band(
                     trilinear::sum_padded(grid, p.q0, p.dq, p.before_run, 0.0)
                 };
             }
-            // Empty marches, and marches of 2^31 samples or more (a step far below the voxel
-            // size), stay per ray.
-            let lanes = |m: &trilinear::March| m.count > 0 && m.count < 1 << 31;
             let mut rays = plans
                 .iter()
                 .enumerate()
-                .filter(|(_, (_, p))| lanes(&p.march))
+                .filter(|(_, (_, p))| lane_march(&p.march))
                 .map(|(k, (_, p))| (k, p.march));
             #[cfg(target_arch = "x86_64")]
             // SAFETY: `simd` is supported (`or_narrower`); the grid has fewer than 2^31 voxels
@@ -137,7 +134,7 @@ pub(super) fn trilinear_band(
             drop(rays);
             // The sums up to the samples after the inner loops, then those samples.
             for (k, (_, p)) in plans.iter().enumerate() {
-                let inner = if lanes(&p.march) {
+                let inner = if lane_march(&p.march) {
                     inner[k]
                 } else {
                     trilinear::march_scalar(grid, &p.march)
@@ -166,6 +163,19 @@ pub(super) fn trilinear_band(
         }
     }
     hits
+}
+
+/// Whether the trilinear march runs on 16 lanes: the AVX-512 path with
+/// [`MarchLanes::Sixteen`] (else 8 lanes, or the per-ray loop on the scalar path).
+pub(super) fn sixteen_lanes(simd: Simd, march: MarchLanes) -> bool {
+    simd == Simd::Avx512 && march == MarchLanes::Sixteen
+}
+
+/// Whether the lanes of [`trilinear_lanes`] take a ray's inner march: empty marches, and
+/// marches of 2^31 samples or more (a step far below the voxel size; the lanes count in i32),
+/// stay per ray.
+pub(super) fn lane_march(m: &trilinear::March) -> bool {
+    m.count > 0 && m.count < 1 << 31
 }
 
 /// Whether the lanes of [`padded_lanes`] take a run of samples `first..=last`: empty, or fewer
@@ -220,4 +230,54 @@ pub(super) fn padded_runs(
     }
     #[cfg(not(target_arch = "x86_64"))]
     unreachable!("vector paths exist on x86-64 only");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The routing of rays between the lanes and the per-ray loops at each bound: a wrong
+    /// route changes no bit where both can run, so only these predicates can tell; past the
+    /// bounds the lanes' i32 counters would overflow.
+    #[test]
+    fn lanes_take_the_runs_and_marches_within_their_bounds() {
+        let p52 = 1i64 << 52;
+        let p31 = 1i64 << 31;
+        let cases = [
+            ((1, 0), true),               // empty
+            ((p52 + 9, -p52 - 9), true),  // empty, whatever the indices
+            ((3, 3), true),               // one sample
+            ((-5, 7), true),              // both signs
+            ((p52 - 1, p52 - 1), true),   // the largest index
+            ((-p52 + 1, -p52 + 1), true), // the most negative one
+            ((p52, p52), false),          // an index of 2^52
+            ((-p52, -p52 + 3), false),    // -2^52
+            ((0, p52), false),            // the last one too large
+            ((0, p31 - 2), true),         // 2^31 - 1 samples
+            ((0, p31 - 1), false),        // 2^31 samples
+            ((-p31, p31), false),         // more
+        ];
+        for (run, want) in cases {
+            assert_eq!(lane_run(run), want, "{run:?}");
+        }
+        let march = |count: usize| trilinear::March {
+            p: [0; 3],
+            dp: [0; 3],
+            count,
+        };
+        for (count, want) in [
+            (0, false),
+            (1, true),
+            ((1 << 31) - 1, true),
+            (1 << 31, false),
+        ] {
+            assert_eq!(lane_march(&march(count)), want, "{count}");
+        }
+        for simd in Simd::ALL {
+            for march in [MarchLanes::Eight, MarchLanes::Sixteen] {
+                let want = simd == Simd::Avx512 && march == MarchLanes::Sixteen;
+                assert_eq!(sixteen_lanes(simd, march), want, "{simd:?} {march:?}");
+            }
+        }
+    }
 }

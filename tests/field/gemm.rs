@@ -423,3 +423,53 @@ fn a_product_with_no_inner_dimension_is_the_bias_per_row() {
         assert_eq!(z, want, "{simd:?} f64");
     }
 }
+
+/// An empty batch (no rows) or a layer with no outputs touches nothing; an operand one value
+/// too short for its shape is refused, naming it, before anything is written.
+#[test]
+fn empty_products_do_nothing_and_short_operands_are_refused() {
+    let (n, inp, out) = (3, 4, 5);
+    let x = vec![0.5f32; n * inp];
+    let w = vec![0.25f32; inp * out];
+    let b = vec![1.0f32; out];
+    for simd in Simd::supported_paths() {
+        let mut z = vec![7.0f32; n * out];
+        gemm::forward(simd, &x, &w, &b, 0, inp, out, &mut z);
+        gemm::forward(simd, &x, &w, &b, n, inp, 0, &mut z);
+        assert!(z.iter().all(|&v| v == 7.0), "{simd:?}");
+        let short = |x: &[f32], w: &[f32], b: &[f32], zl: usize| {
+            let (x, w, b) = (x.to_vec(), w.to_vec(), b.to_vec());
+            std::panic::catch_unwind(move || {
+                let mut z = vec![7.0f32; zl];
+                gemm::forward(simd, &x, &w, &b, n, inp, out, &mut z);
+            })
+            .err()
+            .and_then(|e| e.downcast_ref::<&str>().map(|s| s.to_string()))
+            .unwrap_or_default()
+        };
+        let m = n * inp - 1;
+        assert!(
+            short(&x[..m], &w, &b, n * out).contains("A too short"),
+            "{simd:?}"
+        );
+        let m = inp * out - 1;
+        assert!(
+            short(&x, &w[..m], &b, n * out).contains("B too short"),
+            "{simd:?}"
+        );
+        assert!(
+            short(&x, &w, &b, n * out - 1).contains("C too short"),
+            "{simd:?}"
+        );
+        assert!(
+            short(&x, &w, &b[..out - 1], n * out).contains("bias too short"),
+            "{simd:?}"
+        );
+        assert_eq!(
+            short(&x, &w, &b, n * out),
+            "",
+            "{simd:?}: the exact sizes pass"
+        );
+    }
+    assert_eq!(gemm::flops(3, 5, 7), 210);
+}
