@@ -470,6 +470,16 @@ fn empty_products_do_nothing_and_short_operands_are_refused() {
             "",
             "{simd:?}: the exact sizes pass"
         );
+        // dW = X^T dY reads X column by column (a column-major A): one value short is refused.
+        let g = vec![0.5f32; n * out];
+        for xl in [n * inp - 1, n * inp] {
+            let (xs, g) = (x[..xl].to_vec(), g.clone());
+            let r = std::panic::catch_unwind(move || {
+                let (mut gw, mut gb) = (vec![0.0f32; inp * out], vec![0.0f32; out]);
+                gemm::grad_weight(simd, &xs, &g, n, inp, out, &mut gw, &mut gb);
+            });
+            assert_eq!(r.is_err(), xl < n * inp, "{simd:?}: X of {xl} values");
+        }
     }
     assert_eq!(gemm::flops(3, 5, 7), 210);
 }
