@@ -252,7 +252,7 @@ mod tests {
             ((-p52 + 1, -p52 + 1), true), // the most negative one
             ((p52, p52), false),          // an index of 2^52
             ((-p52, -p52 + 3), false),    // -2^52
-            ((0, p52), false),            // the last one too large
+            ((p52 - 5, p52), false),      // the last one 2^52
             ((0, p31 - 2), true),         // 2^31 - 1 samples
             ((0, p31 - 1), false),        // 2^31 samples
             ((-p31, p31), false),         // more
