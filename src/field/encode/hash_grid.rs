@@ -226,6 +226,7 @@ impl HashGrid {
                 Simd::Avx2 => return unsafe { scatter_level_avx2(self, l, xs, g, gl) },
                 Simd::Scalar => {}
             }
+            let _ = simd;
             self.scatter_level(l, xs, g, gl)
         });
     }
