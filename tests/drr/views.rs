@@ -4,7 +4,7 @@
 use std::sync::Mutex;
 
 use unispine::drr::{self, MarchLanes, Method, Projector, MAX_PROJECTION_BYTES};
-use unispine::geometry::{ConeBeam, Mode};
+use unispine::geometry::ConeBeam;
 use unispine::simd::Simd;
 use unispine::volume::Volume;
 
@@ -12,18 +12,8 @@ use unispine::volume::Volume;
 fn scene(n_det: [usize; 2]) -> (Volume<f32>, ConeBeam) {
     let mut vol = Volume::<f32>::zeros([4, 4, 4], [1.0; 3]);
     vol.data.iter_mut().for_each(|v| *v = 1.0);
-    let geo = ConeBeam {
-        dsd: 400.0,
-        dso: 250.0,
-        n_detector: n_det,
-        d_detector: [16.0 / n_det[0] as f64, 16.0 / n_det[1] as f64],
-        n_voxel: vol.dims,
-        d_voxel: vol.spacing,
-        off_origin: vol.offset,
-        off_detector: [0.0, 0.0],
-        mode: Mode::Cone,
-        accuracy: 0.5,
-    };
+    let pitch = [16.0 / n_det[0] as f64, 16.0 / n_det[1] as f64];
+    let geo = ConeBeam::centred(n_det, pitch, vol.dims, vol.spacing);
     (vol, geo)
 }
 
