@@ -263,7 +263,8 @@ impl HashGrid {
 
 /// Asks the CPU to bring the cache lines of the corner entries `idx` of a level's table `lt`
 /// (`nf` values each) into the cache: a hint, it changes no value. Corners come in x pairs
-/// whose entries are neighbours, so every other one is enough.
+/// whose entries are a few apart (the x term of the index is x itself: neighbours on a dense
+/// level, the low bits on a hashed one), so every other one is enough.
 #[inline(always)]
 fn prefetch_corners<R>(lt: &[R], idx: &[usize; 8], nf: usize) {
     #[cfg(target_arch = "x86_64")]
