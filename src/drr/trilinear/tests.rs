@@ -1,0 +1,178 @@
+//! The trilinear ray-march's pieces against their definitions: the zero-padded interpolant
+//! summed over the corners in the grid, and each ray's lattice split into the samples before,
+//! on and after the fast path found by walking the whole lattice.
+
+use super::super::grid::Grid;
+use crate::geometry::{ConeBeam, Mode};
+use crate::real::Real;
+use crate::volume::Volume;
+use rand::{RngExt, SeedableRng};
+
+/// The zero-padded interpolant by its definition: the corners outside the grid skipped.
+fn padded_by_definition<R: Real>(grid: &Grid<R>, q: [f64; 3]) -> R {
+    let mut at = [[None; 2]; 3];
+    let mut wt = [[R::zero(); 2]; 3];
+    for a in 0..3 {
+        let n = grid.n[a];
+        if !(q[a] > -1.0 && q[a] < n as f64) {
+            return R::zero();
+        }
+        let fl = q[a].floor();
+        let f = R::c(q[a] - fl);
+        let i = fl as i64;
+        at[a] = [i, i + 1].map(|i| (i >= 0 && i < n as i64).then_some(i as usize));
+        wt[a] = [R::one() - f, f];
+    }
+    let [nx, ny, _] = grid.n;
+    let mut acc = R::zero();
+    for corner in 0..8 {
+        let (ux, uy, uz) = (corner & 1, (corner >> 1) & 1, corner >> 2);
+        if let (Some(x), Some(y), Some(z)) = (at[0][ux], at[1][uy], at[2][uz]) {
+            let w = R::one() * wt[0][ux] * wt[1][uy] * wt[2][uz];
+            acc += w * grid.data[x + nx * (y + ny * z)];
+        }
+    }
+    acc
+}
+
+fn check<R: Real>(seed: u64) {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    for _ in 0..200 {
+        let (n, data) = super::super::grid::random_values::<R>(&mut rng, 4);
+        let grid = Grid::unit(&data, n);
+        for _ in 0..200 {
+            // Outside, on the faces' half-voxel shells, on lattice points, inside.
+            let q = n.map(|na| match rng.random_range(0..4) {
+                0 => rng.random_range(-1.5..na as f64 + 0.5),
+                1 => rng.random_range(-1.0..0.0),
+                2 => rng.random_range(-1..na as i64) as f64,
+                _ => rng.random_range(na as f64 - 1.0..na as f64),
+            });
+            let fast = super::sample_padded(&grid, q);
+            let slow = padded_by_definition(&grid, q);
+            assert_eq!(fast.f64().to_bits(), slow.f64().to_bits(), "{n:?} {q:?}");
+        }
+    }
+}
+
+#[test]
+fn padded_sample_matches_the_sum_over_the_corners_in_the_grid() {
+    check::<f32>(1);
+    check::<f64>(2);
+}
+
+/// The first and last lattice index `i` (`i >= 0` for a cone beam) whose point `o + i h d`, in
+/// continuous voxel index (centres at integers), lies in `[lo, hi]` on every axis, found by
+/// walking the lattice across the whole scene; `None` when no point does. The points between
+/// are checked to lie in the box too (a convex box meets a line in one interval).
+fn lattice_span(
+    grid: &Grid<f32>,
+    ray: ([f64; 3], [f64; 3], f64),
+    cone: bool,
+    lo: f64,
+    hi_below_n: f64,
+) -> Option<(i64, i64)> {
+    let (o, d, h) = ray;
+    let reach = 4000.0;
+    let last = (reach / h) as i64;
+    let first = if cone { 0 } else { -last };
+    let inside = |i: i64| {
+        (0..3).all(|a| {
+            let q = (o[a] + i as f64 * h * d[a] - grid.lo[a]) / grid.s[a] - 0.5;
+            q >= lo && q <= grid.n[a] as f64 - hi_below_n
+        })
+    };
+    let a = (first..=last).find(|&i| inside(i))?;
+    let b = (a..=last).take_while(|&i| inside(i)).last()?;
+    assert!(
+        !(b + 1..=last).any(inside),
+        "the box meets the ray in one interval"
+    );
+    Some((a, b))
+}
+
+/// Each ray's zero-padded samples (`plan_runs`' `before_run`, fast path and `after`, and the
+/// benchmark's `sample_count`) against the lattice points in the box of the zero-padded
+/// interpolant (box + half a voxel) and in the box of voxel centres, found by walking the whole
+/// lattice: random volumes (one voxel on an axis included), spacings, offsets, angles,
+/// accuracies, both beams, and detectors reaching past the volume's shadow (rays that miss,
+/// graze a corner with one sample, and cross).
+#[test]
+fn each_ray_s_samples_split_where_the_lattice_meets_the_boxes() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let (mut single, mut fast, mut none) = (0, 0, 0);
+    for case in 0..60 {
+        let dims = [0; 3].map(|_| rng.random_range(1..=6usize));
+        let spacing = [0; 3].map(|_| rng.random_range(0.5..2.0));
+        let mut vol = Volume::<f32>::zeros(dims, spacing);
+        vol.offset = [0; 3].map(|_| rng.random_range(-1.0..1.0));
+        let grid = Grid::new(&vol);
+        let cone = case % 2 == 0;
+        let diag = (0..3)
+            .map(|a| (dims[a] as f64 * spacing[a]).powi(2))
+            .sum::<f64>();
+        let (dso, dsd) = (60.0, 90.0);
+        let shadow = diag.sqrt() * if cone { dsd / (dso - diag.sqrt()) } else { 1.0 };
+        let n_det = 12;
+        let pitch = 0.7 * shadow / n_det as f64;
+        let geo = ConeBeam {
+            dsd,
+            dso,
+            n_detector: [n_det, n_det],
+            d_detector: [pitch * rng.random_range(0.9..1.1), pitch],
+            n_voxel: dims,
+            d_voxel: spacing,
+            off_origin: vol.offset,
+            off_detector: [0.0; 2].map(|_| rng.random_range(-0.1..0.1) * shadow),
+            mode: if cone { Mode::Cone } else { Mode::Parallel },
+            accuracy: rng.random_range(0.3..1.0),
+        };
+        let cam = geo.camera(rng.random_range(0.0..std::f64::consts::TAU));
+        let setup = super::Setup::new(&grid, geo.accuracy);
+        for row in 0..n_det {
+            for col in 0..n_det {
+                let (o, d, h, _) = super::ray(&grid, &setup, &cam, col, row);
+                let at = format!("case {case}, pixel ({col}, {row})");
+                let outer = lattice_span(&grid, (o, d, h), cone, -1.0, 0.0);
+                let inner = lattice_span(&grid, (o, d, h), cone, 0.0, 1.0);
+                let plan = super::plan_runs(&grid, &setup, &cam, col, row);
+                let count = super::sample_count(&setup, &cam, o, d, h);
+                let empty = |r: (i64, i64)| r.0 > r.1;
+                let Some((a, b)) = outer else {
+                    none += 1;
+                    assert_eq!(count, 0, "{at}");
+                    assert!(empty(plan.before_run) && empty(plan.after), "{at}");
+                    assert_eq!(plan.march.count, 0, "{at}");
+                    continue;
+                };
+                single += usize::from(a == b);
+                assert_eq!(count, (b - a + 1) as u64, "{at}");
+                match inner.filter(|_| dims.iter().all(|&n| n >= 2)) {
+                    Some((c, e)) => {
+                        fast += 1;
+                        assert_eq!(plan.before_run, (a, c - 1), "{at}");
+                        assert_eq!(plan.march.count, (e - c + 1) as usize, "{at}");
+                        assert_eq!(plan.after, (e + 1, b), "{at}");
+                        for ax in 0..3 {
+                            let q = (o[ax] + c as f64 * h * d[ax] - grid.lo[ax]) / grid.s[ax] - 0.5;
+                            let p = plan.march.p[ax] as f64 / super::FIX;
+                            assert!((p - q).abs() < 1e-9, "{at}: axis {ax}: {p} vs {q}");
+                            let dq = plan.march.dp[ax] as f64 / super::FIX;
+                            assert!((dq - h * d[ax] / grid.s[ax]).abs() < 1e-9, "{at}");
+                        }
+                    }
+                    None => {
+                        assert_eq!(plan.before_run, (a, b), "{at}");
+                        assert_eq!(plan.march.count, 0, "{at}");
+                        assert!(empty(plan.after), "{at}");
+                    }
+                }
+            }
+        }
+    }
+    eprintln!("rays: {none} without samples, {single} with one, {fast} with a fast path");
+    assert!(
+        none > 100 && single > 0 && fast > 1000,
+        "{none} {single} {fast}"
+    );
+}
