@@ -61,26 +61,29 @@ fn padded_sample_matches_the_sum_over_the_corners_in_the_grid() {
     check::<f64>(2);
 }
 
+/// Continuous voxel index (centres at integers) of the lattice point `o + i h d`.
+fn index_of<R: Real>(grid: &Grid<R>, ray: ([f64; 3], [f64; 3], f64), i: i64) -> [f64; 3] {
+    let (o, d, h) = ray;
+    std::array::from_fn(|a| (o[a] + i as f64 * h * d[a] - grid.lo[a]) / grid.s[a] - 0.5)
+}
+
 /// The first and last lattice index `i` (`i >= 0` for a cone beam) whose point `o + i h d`, in
-/// continuous voxel index (centres at integers), lies in `[lo, hi]` on every axis, found by
-/// walking the lattice across the whole scene; `None` when no point does. The points between
-/// are checked to lie in the box too (a convex box meets a line in one interval).
-fn lattice_span(
-    grid: &Grid<f32>,
+/// continuous voxel index, lies in `[lo, n - hi_below_n]` on every axis, found by walking the
+/// lattice across the whole scene; `None` when no point does. The points between are checked
+/// to lie in the box too (a convex box meets a line in one interval).
+fn lattice_span<R: Real>(
+    grid: &Grid<R>,
     ray: ([f64; 3], [f64; 3], f64),
     cone: bool,
     lo: f64,
     hi_below_n: f64,
 ) -> Option<(i64, i64)> {
-    let (o, d, h) = ray;
     let reach = 4000.0;
-    let last = (reach / h) as i64;
+    let last = (reach / ray.2) as i64;
     let first = if cone { 0 } else { -last };
     let inside = |i: i64| {
-        (0..3).all(|a| {
-            let q = (o[a] + i as f64 * h * d[a] - grid.lo[a]) / grid.s[a] - 0.5;
-            q >= lo && q <= grid.n[a] as f64 - hi_below_n
-        })
+        let q = index_of(grid, ray, i);
+        (0..3).all(|a| q[a] >= lo && q[a] <= grid.n[a] as f64 - hi_below_n)
     };
     let a = (first..=last).find(|&i| inside(i))?;
     let b = (a..=last).take_while(|&i| inside(i)).last()?;
@@ -89,6 +92,43 @@ fn lattice_span(
         "the box meets the ray in one interval"
     );
     Some((a, b))
+}
+
+/// A random scene: a volume of 1 to 6 voxels per axis (values in [0.5, 2)), spacings, offset,
+/// accuracy and angle, a cone beam for even `case` and a parallel one for odd, and a 12 x 12
+/// detector a little smaller than the volume's shadow (rays that miss, graze a corner with one
+/// sample, and cross).
+fn random_scene<R: Real>(rng: &mut impl rand::Rng, case: usize) -> (Volume<R>, ConeBeam, f64) {
+    let dims = [0; 3].map(|_| rng.random_range(1..=6usize));
+    let spacing = [0; 3].map(|_| rng.random_range(0.5..2.0));
+    let mut vol = Volume::<R>::zeros(dims, spacing);
+    vol.offset = [0; 3].map(|_| rng.random_range(-1.0..1.0));
+    vol.data
+        .iter_mut()
+        .for_each(|v| *v = R::c(rng.random_range(0.5..2.0)));
+    let cone = case.is_multiple_of(2);
+    let diag = (0..3)
+        .map(|a| (dims[a] as f64 * spacing[a]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let (dso, dsd) = (60.0, 90.0);
+    let shadow = diag * if cone { dsd / (dso - diag) } else { 1.0 };
+    let n_det = 12;
+    let pitch = 0.7 * shadow / n_det as f64;
+    let geo = ConeBeam {
+        dsd,
+        dso,
+        n_detector: [n_det, n_det],
+        d_detector: [pitch * rng.random_range(0.9..1.1), pitch],
+        n_voxel: dims,
+        d_voxel: spacing,
+        off_origin: vol.offset,
+        off_detector: [0.0; 2].map(|_| rng.random_range(-0.1..0.1) * shadow),
+        mode: if cone { Mode::Cone } else { Mode::Parallel },
+        accuracy: rng.random_range(0.3..1.0),
+    };
+    let angle = rng.random_range(0.0..std::f64::consts::TAU);
+    (vol, geo, angle)
 }
 
 /// Each ray's zero-padded samples (`plan_runs`' `before_run`, fast path and `after`, and the
@@ -102,32 +142,9 @@ fn each_ray_s_samples_split_where_the_lattice_meets_the_boxes() {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
     let (mut single, mut fast, mut none) = (0, 0, 0);
     for case in 0..60 {
-        let dims = [0; 3].map(|_| rng.random_range(1..=6usize));
-        let spacing = [0; 3].map(|_| rng.random_range(0.5..2.0));
-        let mut vol = Volume::<f32>::zeros(dims, spacing);
-        vol.offset = [0; 3].map(|_| rng.random_range(-1.0..1.0));
-        let grid = Grid::new(&vol);
-        let cone = case % 2 == 0;
-        let diag = (0..3)
-            .map(|a| (dims[a] as f64 * spacing[a]).powi(2))
-            .sum::<f64>();
-        let (dso, dsd) = (60.0, 90.0);
-        let shadow = diag.sqrt() * if cone { dsd / (dso - diag.sqrt()) } else { 1.0 };
-        let n_det = 12;
-        let pitch = 0.7 * shadow / n_det as f64;
-        let geo = ConeBeam {
-            dsd,
-            dso,
-            n_detector: [n_det, n_det],
-            d_detector: [pitch * rng.random_range(0.9..1.1), pitch],
-            n_voxel: dims,
-            d_voxel: spacing,
-            off_origin: vol.offset,
-            off_detector: [0.0; 2].map(|_| rng.random_range(-0.1..0.1) * shadow),
-            mode: if cone { Mode::Cone } else { Mode::Parallel },
-            accuracy: rng.random_range(0.3..1.0),
-        };
-        let cam = geo.camera(rng.random_range(0.0..std::f64::consts::TAU));
+        let (vol, geo, angle) = random_scene::<f32>(&mut rng, case);
+        let (grid, cone, n_det) = (Grid::new(&vol), geo.mode == Mode::Cone, geo.n_detector[0]);
+        let cam = geo.camera(angle);
         let setup = super::Setup::new(&grid, geo.accuracy);
         for row in 0..n_det {
             for col in 0..n_det {
@@ -147,14 +164,15 @@ fn each_ray_s_samples_split_where_the_lattice_meets_the_boxes() {
                 };
                 single += usize::from(a == b);
                 assert_eq!(count, (b - a + 1) as u64, "{at}");
-                match inner.filter(|_| dims.iter().all(|&n| n >= 2)) {
+                match inner.filter(|_| grid.n.iter().all(|&n| n >= 2)) {
                     Some((c, e)) => {
                         fast += 1;
                         assert_eq!(plan.before_run, (a, c - 1), "{at}");
                         assert_eq!(plan.march.count, (e - c + 1) as usize, "{at}");
                         assert_eq!(plan.after, (e + 1, b), "{at}");
+                        let q = index_of(&grid, (o, d, h), c);
                         for ax in 0..3 {
-                            let q = (o[ax] + c as f64 * h * d[ax] - grid.lo[ax]) / grid.s[ax] - 0.5;
+                            let q = q[ax];
                             let p = plan.march.p[ax] as f64 / super::FIX;
                             assert!((p - q).abs() < 1e-9, "{at}: axis {ax}: {p} vs {q}");
                             let dq = plan.march.dp[ax] as f64 / super::FIX;
@@ -174,5 +192,62 @@ fn each_ray_s_samples_split_where_the_lattice_meets_the_boxes() {
     assert!(
         none > 100 && single > 0 && fast > 1000,
         "{none} {single} {fast}"
+    );
+}
+
+/// Each ray's value against `h x` the sum, over every lattice point the walk of the scene finds
+/// in the box + half a voxel, of the zero-padded interpolant by its definition (the fast path,
+/// its ends moved to the zero-padded path, and the samples before and after, all at once): on
+/// the random scenes, and on parallel beams along `+x` and `-x` whose samples land on voxel
+/// centres (pixel centres on the centre lines of `y` and `z`), where the fast path's end samples
+/// on the last voxel centre, and whole rays on the last centre line of `y` or `z`, take the
+/// zero-padded path.
+#[test]
+fn each_ray_is_h_times_the_sum_of_the_interpolant_over_its_lattice() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+    let mut scenes: Vec<_> = (0..40)
+        .map(|case| random_scene::<f64>(&mut rng, case))
+        .collect();
+    for angle in [0.0, std::f64::consts::PI] {
+        let mut vol = Volume::<f64>::zeros([5, 4, 3], [1.0; 3]);
+        vol.data
+            .iter_mut()
+            .for_each(|v| *v = rng.random_range(0.5..2.0));
+        let mut geo = ConeBeam::centred([3, 4], [1.0, 1.0], vol.dims, vol.spacing);
+        geo.mode = Mode::Parallel;
+        geo.accuracy = 0.5;
+        scenes.push((vol, geo, angle));
+    }
+    let mut moved = 0;
+    for (case, (vol, geo, angle)) in scenes.iter().enumerate() {
+        let (grid, cone) = (Grid::new(vol), geo.mode == Mode::Cone);
+        let cam = geo.camera(*angle);
+        let setup = super::Setup::new(&grid, geo.accuracy);
+        for row in 0..geo.n_detector[0] {
+            for col in 0..geo.n_detector[1] {
+                let (got, _) = super::pixel(&grid, &setup, &cam, col, row);
+                let (o, d, h, _) = super::ray(&grid, &setup, &cam, col, row);
+                let span = lattice_span(&grid, (o, d, h), cone, -1.0, 0.0);
+                let sum: f64 = span
+                    .into_iter()
+                    .flat_map(|(a, b)| a..=b)
+                    .map(|i| padded_by_definition(&grid, index_of(&grid, (o, d, h), i)))
+                    .sum();
+                let want = h * sum;
+                let at = format!("case {case}, pixel ({col}, {row})");
+                assert!(
+                    (got - want).abs() <= 1e-9 * want.max(1.0),
+                    "{at}: {got} vs {want}"
+                );
+                let plan = super::plan_runs(&grid, &setup, &cam, col, row);
+                let inner = lattice_span(&grid, (o, d, h), cone, 0.0, 1.0);
+                let fast = inner.map_or(0, |(c, e)| (e - c + 1) as usize);
+                moved += usize::from(plan.fast && plan.march.count < fast);
+            }
+        }
+    }
+    assert!(
+        moved >= 6,
+        "{moved} rays with end samples moved off the fast path"
     );
 }
