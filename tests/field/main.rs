@@ -8,6 +8,7 @@ mod encoders;
 mod gemm;
 mod golden;
 mod gradcheck;
+mod init;
 mod model_file;
 mod sampling;
 mod settings;
