@@ -394,4 +394,21 @@ mod tests {
         let h = 31u32 ^ 31u32.wrapping_mul(19_349_663) ^ 31u32.wrapping_mul(83_492_791);
         assert_eq!(idx[0], (h as usize) % 4096);
     }
+
+    /// A point beyond the bound has corners past the dense level's last entry; torch-ngp takes
+    /// the index `x + (R + 1) (y + (R + 1) z)` modulo the level size, which is what wraps them
+    /// (the corner at exactly the size wraps to 0).
+    #[test]
+    fn corners_beyond_the_bound_wrap_on_a_dense_level() {
+        let g = HashGrid::new(4, 2, 12, 4, 0.5);
+        // Level 0: R = 4, 125 entries. z = 5/3 - 1/2 maps to u = 5/3, pos 5.5: corners 5 and 6.
+        let x = [-0.5f64, -0.5, 5.0 / 3.0 - 0.5];
+        let (idx, w) = g.corners(x, 0);
+        for (c, (&i, &wc)) in idx.iter().zip(&w).enumerate() {
+            let (cx, cy, cz) = (c & 1, (c >> 1) & 1, 5 + (c >> 2));
+            assert_eq!(i, (cx + 5 * (cy + 5 * cz)) % 125, "corner {c}");
+            assert!((wc - 0.125).abs() < 1e-12, "corner {c}: {wc}");
+        }
+        assert_eq!((idx[0], idx[4]), (0, 25));
+    }
 }
