@@ -498,3 +498,32 @@ fn tensorf_presets_follow_the_upstream_config() {
     let sd = (pl.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / pl.len() as f64).sqrt();
     assert!(mean.abs() < 1e-3 && (sd - 0.1).abs() < 1e-3, "{mean} {sd}");
 }
+
+/// A point that `grid_sample` cannot place on the grid (a NaN or infinite coordinate) falls
+/// outside every texel and reads the zero padding: its VM encoding is 0, not NaN, in both line
+/// modes.
+#[test]
+fn a_vm_point_off_every_grid_reads_the_zero_padding() {
+    for lines in [VmLines::Upstream, VmLines::Corrected] {
+        let vm = TensorVm {
+            resolution: 5,
+            components: 2,
+            out_dim: 3,
+            bound: 0.3,
+            lines,
+        };
+        let p = rand_vec(vm.n_params(), 11);
+        let e = Encoder::TensorVm(vm);
+        let mut out = vec![f64::NAN; 3];
+        e.encode(&p, [0.1, -0.05, 0.2], &mut out);
+        assert!(out.iter().all(|v| *v != 0.0 && v.is_finite()), "{out:?}");
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            for axis in 0..3 {
+                let mut x = [0.1, -0.05, 0.2];
+                x[axis] = bad;
+                e.encode(&p, x, &mut out);
+                assert_eq!(out, [0.0; 3], "{lines:?}: x[{axis}] = {bad}");
+            }
+        }
+    }
+}

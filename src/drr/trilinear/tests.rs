@@ -243,6 +243,15 @@ fn each_ray_is_h_times_the_sum_of_the_interpolant_over_its_lattice() {
                 let inner = lattice_span(&grid, (o, d, h), cone, 0.0, 1.0);
                 let fast = inner.map_or(0, |(c, e)| (e - c + 1) as usize);
                 moved += usize::from(plan.fast && plan.march.count < fast);
+                if case == 40 {
+                    // Exact positions (angle 0): the fast path holds the samples in [0, n - 1) on every
+                    // axis (one on the last centre, of any axis, takes the zero-padded path).
+                    let strict = span.into_iter().flat_map(|(a, b)| a..=b).filter(|&i| {
+                        let q = index_of(&grid, (o, d, h), i);
+                        (0..3).all(|a| q[a] >= 0.0 && q[a] < grid.n[a] as f64 - 1.0)
+                    });
+                    assert_eq!(plan.march.count, strict.count(), "{at}");
+                }
             }
         }
     }
@@ -250,4 +259,55 @@ fn each_ray_is_h_times_the_sum_of_the_interpolant_over_its_lattice() {
         moved >= 6,
         "{moved} rays with end samples moved off the fast path"
     );
+}
+
+/// `fast_range` on exact positions: a sample on the last voxel centre of any axis, at either
+/// end of the range, leaves the fast path (its 8 neighbours are not all inside the grid) and is
+/// added to `moved` through the zero-padded path; the others stay, from the first sample kept.
+#[test]
+fn end_samples_on_the_last_centre_of_each_axis_take_the_padded_path() {
+    let n = [4, 5, 6];
+    let data: Vec<f64> = (0..120).map(|i| 1.0 + i as f64 * 0.125).collect();
+    let grid = Grid::unit(&data, n);
+    for axis in 0..3 {
+        for leading in [false, true] {
+            // Four steps from the centre box's middle to the last centre of `axis`, or back.
+            let mut q0 = [1.0, 1.5, 2.0];
+            let mut dq = [0.125, 0.25, 0.375];
+            let last = (n[axis] - 1) as f64;
+            dq[axis] = (last - q0[axis]) / 4.0;
+            if leading {
+                q0[axis] = last;
+                dq = dq.map(|v| -v);
+                q0 = std::array::from_fn(|a| if a == axis { last } else { q0[a] - 4.0 * dq[a] });
+            }
+            let mut moved = 0.0;
+            let m = super::fast_range(&grid, q0, dq, 0, 4, &mut moved);
+            let on_last = if leading { 0 } else { 4 };
+            let q = super::at(q0, dq, on_last);
+            assert_eq!(q[axis], last, "axis {axis}");
+            assert_eq!(m.count, 4, "axis {axis}, leading {leading}");
+            let first = if leading { 1 } else { 0 };
+            let p = super::at(q0, dq, first).map(|v| (v * super::FIX) as i64);
+            assert_eq!(m.p, p, "axis {axis}, leading {leading}");
+            assert_eq!(moved, padded_by_definition(&grid, q), "axis {axis}");
+        }
+    }
+}
+
+/// `fast_range` when every sample lies on the last centre line of `y`: all leave the fast path,
+/// each added to `moved` once, in order, and none past the range.
+#[test]
+fn a_range_on_the_last_centre_line_takes_the_padded_path_whole() {
+    let n = [4, 5, 6];
+    let data: Vec<f64> = (0..120).map(|i| 1.0 + i as f64 * 0.125).collect();
+    let grid = Grid::unit(&data, n);
+    let (q0, dq) = ([0.5, 4.0, 1.0], [0.25, 0.0, 0.5]);
+    let mut moved = 0.0;
+    let m = super::fast_range(&grid, q0, dq, 1, 4, &mut moved);
+    assert_eq!(m.count, 0);
+    let want = (1..=4).fold(0.0, |acc, i| {
+        acc + padded_by_definition(&grid, super::at(q0, dq, i))
+    });
+    assert_eq!(moved, want);
 }
