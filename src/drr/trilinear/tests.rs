@@ -244,8 +244,9 @@ fn each_ray_is_h_times_the_sum_of_the_interpolant_over_its_lattice() {
                 let fast = inner.map_or(0, |(c, e)| (e - c + 1) as usize);
                 moved += usize::from(plan.fast && plan.march.count < fast);
                 if case == 40 {
-                    // Exact positions (angle 0): the fast path holds the samples in [0, n - 1) on every
-                    // axis (one on the last centre, of any axis, takes the zero-padded path).
+                    // Exact positions (angle 0): the fast path holds the samples in [0, n - 1)
+                    // on every axis (one on the last centre of any axis takes the zero-padded
+                    // path).
                     let strict = span.into_iter().flat_map(|(a, b)| a..=b).filter(|&i| {
                         let q = index_of(&grid, (o, d, h), i);
                         (0..3).all(|a| q[a] >= 0.0 && q[a] < grid.n[a] as f64 - 1.0)
