@@ -527,3 +527,37 @@ fn a_vm_point_off_every_grid_reads_the_zero_padding() {
         }
     }
 }
+
+/// The VM's backward over more points than one of its chunks (256) equals the gradients of the
+/// points taken one at a time and added in order, in both line modes (each chunk reads its own
+/// rows of the output gradient, strided and offset).
+#[test]
+fn vm_backward_over_many_chunks_is_the_sum_of_its_points() {
+    for lines in [VmLines::Upstream, VmLines::Corrected] {
+        let e = Encoder::TensorVm(TensorVm {
+            resolution: 4,
+            components: 2,
+            out_dim: 3,
+            bound: 0.3,
+            lines,
+        });
+        let p = rand_vec(e.n_params(), 21);
+        let pts = fc::points(600, 22);
+        let (stride, off) = (5, 2);
+        let g = rand_vec(pts.len() * stride, 23);
+        let mut block = vec![0.0; e.n_params()];
+        e.backward(Simd::active(), &p, &pts, &g, stride, off, &mut block);
+        let mut one = vec![0.0; e.n_params()];
+        for (n, x) in pts.iter().enumerate() {
+            let gn = &g[n * stride + off..n * stride + off + 3];
+            e.backward(Simd::active(), &p, &[*x], gn, 3, 0, &mut one);
+        }
+        for (k, (a, b)) in block.iter().zip(&one).enumerate() {
+            assert!(
+                (a - b).abs() <= 1e-12 * b.abs().max(1.0),
+                "{lines:?} {k}: {a} vs {b}"
+            );
+        }
+        assert!(one.iter().filter(|v| **v != 0.0).count() > e.n_params() / 2);
+    }
+}
