@@ -278,9 +278,9 @@ fn end_samples_on_the_last_centre_of_each_axis_take_the_padded_path() {
             let last = (n[axis] - 1) as f64;
             dq[axis] = (last - q0[axis]) / 4.0;
             if leading {
-                q0[axis] = last;
+                // The same four steps walked back from the last centre.
+                q0 = std::array::from_fn(|a| q0[a] + 4.0 * dq[a]);
                 dq = dq.map(|v| -v);
-                q0 = std::array::from_fn(|a| if a == axis { last } else { q0[a] - 4.0 * dq[a] });
             }
             let mut moved = 0.0;
             let m = super::fast_range(&grid, q0, dq, 0, 4, &mut moved);
