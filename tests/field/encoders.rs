@@ -122,7 +122,7 @@ fn gradcheck_json_lists_every_row() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("--stage"));
 }
 
-fn rand_vec(n: usize, seed: u64) -> Vec<f64> {
+pub(crate) fn rand_vec(n: usize, seed: u64) -> Vec<f64> {
     fc::uniform(n, -1.0, 1.0, seed)
 }
 

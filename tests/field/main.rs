@@ -4,6 +4,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod dense_grid;
 mod encoders;
 mod gemm;
 mod golden;
