@@ -103,3 +103,37 @@ fn hash_and_dense_grid_features_start_uniform_in_1e_4() {
         assert!(f.params[ne..].iter().any(|v| v.abs() > 1e-3));
     }
 }
+
+/// TensoRF's initial parameters as a function of the uniform stream, for reproducibility: the
+/// planes and lines take the stream two numbers at a time (Box-Muller: `r = sqrt(-2 ln(1 - u1))`,
+/// `0.1 r cos(2 pi u2)` then `0.1 r sin(2 pi u2)`), the basis the numbers that follow, one each
+/// (`(2 u - 1) / sqrt(3C)`). The planes and lines hold an even count, `3 C n (n + 1)`.
+#[test]
+fn tensor_vm_init_takes_box_muller_pairs_then_one_number_a_basis_value() {
+    let vm = TensorVm {
+        resolution: 5,
+        components: 2,
+        out_dim: 3,
+        bound: 0.3,
+        lines: VmLines::Upstream,
+    };
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    let stream: Vec<f64> = (0..vm.n_params() + 8)
+        .map(|_| rng.random::<f64>())
+        .collect();
+    let mut next = stream.iter().copied();
+    let p: Vec<f64> = vm.init(&mut || next.next().unwrap());
+    let (_, boff) = vm.offsets();
+    assert_eq!(boff, 3 * 2 * 5 * 6);
+    for (k, pair) in p[..boff].chunks(2).enumerate() {
+        let (u1, u2) = (1.0 - stream[2 * k], stream[2 * k + 1]);
+        let r = (-2.0 * u1.ln()).sqrt();
+        let a = std::f64::consts::TAU * u2;
+        assert_eq!(pair, [0.1 * r * a.cos(), 0.1 * r * a.sin()], "pair {k}");
+    }
+    let bnd = 1.0 / 6f64.sqrt();
+    for (i, v) in p[boff..].iter().enumerate() {
+        assert_eq!(*v, (2.0 * stream[boff + i] - 1.0) * bnd, "basis {i}");
+    }
+    assert_eq!(p.len(), vm.n_params());
+}
