@@ -3,5 +3,6 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod data_terms;
 mod golden;
 mod gradcheck;
