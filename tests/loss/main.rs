@@ -6,3 +6,4 @@ mod common;
 mod data_terms;
 mod golden;
 mod gradcheck;
+mod window;
