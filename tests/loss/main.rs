@@ -6,4 +6,5 @@ mod common;
 mod data_terms;
 mod golden;
 mod gradcheck;
+mod settings;
 mod window;

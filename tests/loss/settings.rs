@@ -1,0 +1,137 @@
+//! The loss stage's own checks (`SpwmConfig::validate`, `LossConfig::validate`, which the
+//! Python module calls) at both ends of every range, from the documented meaning of each
+//! setting: a value just inside is accepted, one just outside (and NaN, and the infinities
+//! where the range is finite) is refused with an error naming the field.
+
+use unispine::loss::spwm::SpwmConfig;
+use unispine::loss::LossConfig;
+
+type SetS = fn(&mut SpwmConfig, f64);
+type SetL = fn(&mut LossConfig, f64);
+
+/// (field, setter, accepted values, refused values)
+fn spwm_cases() -> Vec<(&'static str, SetS, Vec<f64>, Vec<f64>)> {
+    let (inf, nan) = (f64::INFINITY, f64::NAN);
+    vec![
+        (
+            "alpha",
+            |c, v| c.alpha = v,
+            vec![0.0, 1.0, 7.5],
+            vec![-1e-9, inf, nan],
+        ),
+        (
+            "hf_lambda",
+            |c, v| c.hf_lambda = v,
+            vec![0.0, 3.0],
+            vec![-1e-9, inf, nan],
+        ),
+        (
+            "blur_kernel",
+            |c, v| c.blur_kernel = v as usize,
+            vec![1.0, 4.0],
+            vec![0.0],
+        ),
+        (
+            "blur_sigma",
+            |c, v| c.blur_sigma = v,
+            vec![1e-9, 2.0],
+            vec![0.0, -1.0, inf, nan],
+        ),
+        (
+            "quantile",
+            |c, v| c.quantile = v,
+            vec![0.0, 1.0],
+            vec![-1e-9, 1.0 + 1e-9, nan],
+        ),
+        (
+            "tau_max",
+            |c, v| c.tau_max = v,
+            vec![0.0, 1.0 - 1e-9],
+            vec![-1e-9, 1.0, nan],
+        ),
+        (
+            "fixed_tau",
+            |c, v| c.fixed_tau = v,
+            vec![0.0, 1.0 - 1e-9],
+            vec![-1e-9, 1.0, nan],
+        ),
+        (
+            "gate_temperature",
+            |c, v| c.gate_temperature = v,
+            vec![1e-9, 5.0],
+            vec![0.0, -1.0, inf, nan],
+        ),
+    ]
+}
+
+fn loss_cases() -> Vec<(&'static str, SetL, Vec<f64>, Vec<f64>)> {
+    let (inf, nan) = (f64::INFINITY, f64::NAN);
+    vec![
+        (
+            "lambda_dssim",
+            |c, v| c.lambda_dssim = v,
+            vec![0.0, 1.0],
+            vec![-1e-9, 1.0 + 1e-9, nan],
+        ),
+        (
+            "charbonnier_eps",
+            |c, v| c.charbonnier_eps = v,
+            vec![0.0, 2.0],
+            vec![-1e-9, inf, nan],
+        ),
+        (
+            "delta",
+            |c, v| c.delta = v,
+            vec![0.0, 2.0],
+            vec![-1e-9, inf, nan],
+        ),
+    ]
+}
+
+#[test]
+fn spwm_settings_are_checked_at_both_ends_of_every_range() {
+    assert!(SpwmConfig::default().validate().is_ok());
+    for (field, set, good, bad) in spwm_cases() {
+        for v in good {
+            let mut c = SpwmConfig::default();
+            set(&mut c, v);
+            assert!(c.validate().is_ok(), "spwm.{field} = {v} refused");
+        }
+        for v in bad {
+            let mut c = SpwmConfig::default();
+            set(&mut c, v);
+            let e = c
+                .validate()
+                .err()
+                .unwrap_or_else(|| panic!("spwm.{field} = {v} accepted"));
+            assert!(
+                e.to_string().contains(&format!("spwm.{field}")),
+                "{field} = {v}: {e}"
+            );
+        }
+    }
+}
+
+#[test]
+fn loss_settings_are_checked_at_both_ends_of_every_range() {
+    assert!(LossConfig::default().validate().is_ok());
+    for (field, set, good, bad) in loss_cases() {
+        for v in good {
+            let mut c = LossConfig::default();
+            set(&mut c, v);
+            assert!(c.validate().is_ok(), "loss.{field} = {v} refused");
+        }
+        for v in bad {
+            let mut c = LossConfig::default();
+            set(&mut c, v);
+            let e = c
+                .validate()
+                .err()
+                .unwrap_or_else(|| panic!("loss.{field} = {v} accepted"));
+            assert!(
+                e.to_string().contains(&format!("loss.{field}")),
+                "{field} = {v}: {e}"
+            );
+        }
+    }
+}
