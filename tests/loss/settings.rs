@@ -135,3 +135,26 @@ fn loss_settings_are_checked_at_both_ends_of_every_range() {
         }
     }
 }
+
+/// The three named loss settings, as their documents state them: 3DGS / X-Gaussian's
+/// 0.8 L1 + 0.2 (1 - SSIM), plain Charbonnier, and UniSpine-GS's Eqs. (8)-(9) (eps 1e-3,
+/// delta 1e-6), each with lambda_dssim = 0.2.
+#[test]
+fn named_loss_settings_hold_their_data_terms() {
+    use unispine::loss::DataTerm;
+    for (c, term) in [
+        (LossConfig::l1_dssim(), DataTerm::L1),
+        (LossConfig::charbonnier_dssim(), DataTerm::Charbonnier),
+        (
+            LossConfig::weighted_charbonnier_dssim(),
+            DataTerm::WeightedCharbonnier,
+        ),
+    ] {
+        assert_eq!(c.data_term, term);
+        assert_eq!(
+            (c.lambda_dssim, c.charbonnier_eps, c.delta),
+            (0.2, 1e-3, 1e-6),
+            "{term:?}"
+        );
+    }
+}
