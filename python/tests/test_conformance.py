@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 
 from unispine import conformance
-from unispine.conformance import gsplat_cpu
 
 ON_CI = os.environ.get("CI") == "true"
 
@@ -42,6 +41,12 @@ def torch():
 @pytest.fixture(scope="module")
 def gsplat(torch):
     return need("gsplat.cuda._torch_impl", "BUILD_NO_CUDA=1 pip install gsplat==1.5.3")
+
+
+@pytest.fixture(scope="module")
+def gsplat_cpu(gsplat):
+    """The kit's CPU runner of gsplat's reference (it imports torch, so only after the check)."""
+    return importlib.import_module("unispine.conformance.gsplat_cpu")
 
 
 def show(res):
@@ -122,7 +127,7 @@ BREAK_CASES = ["random-medium", "beyond-3-sigma", "alpha-clamp", "saturating", "
                "sh-degree-3"]
 
 
-def test_break_dropped_transmittance_gradient_is_found_and_named(gsplat, monkeypatch, torch):
+def test_break_dropped_transmittance_gradient_is_found_and_named(gsplat_cpu, monkeypatch, torch):
     """The transmittance of the scan detached: the image is right, gradients are not."""
     orig = gsplat_cpu._render_weight_from_alpha
 
@@ -142,7 +147,7 @@ def test_break_dropped_transmittance_gradient_is_found_and_named(gsplat, monkeyp
         assert c["diagnosis"] == "gradient", c["name"]
 
 
-def test_break_wrong_pixel_centre_is_found_and_named(gsplat, monkeypatch):
+def test_break_wrong_pixel_centre_is_found_and_named(gsplat_cpu, monkeypatch):
     """Pixels sampled at integer coordinates (the mean shifted by half a pixel in the pair
     kernel and in gsplat's `accumulate`; the tiles unchanged)."""
     from gsplat.cuda import _torch_impl as ti
@@ -190,7 +195,7 @@ def test_break_three_sigma_cut_is_found_and_named(gsplat, monkeypatch, torch):
 
 # ---- backends that break the contract ----------------------------------------------------
 
-def test_bad_backends_are_reported_per_case_and_the_rest_still_run(gsplat, torch):
+def test_bad_backends_are_reported_per_case_and_the_rest_still_run(gsplat_cpu, torch):
     good = gsplat_cpu.rasterization
     state = {"n": 0}
 
@@ -255,7 +260,7 @@ def test_unknown_case_and_convention_are_errors():
         unispine.rasterize(*params(scene(3, 1)), vm, k, w, h, conventions={"alpha": 0.9})
 
 
-def test_a_numpy_backend_with_a_vjp_is_checked_through_the_adapter(gsplat, torch):
+def test_a_numpy_backend_with_a_vjp_is_checked_through_the_adapter(gsplat_cpu, torch):
     """The numpy contract: arrays in, an image array out, gradients from a `vjp` callable (here
     gsplat's reference behind numpy, its vjp by autograd); the kit chains them to the
     pre-activation groups."""

@@ -351,11 +351,13 @@ def run(backend, dtype="float64", cases="all", report=None, timeout=120.0, conve
     overrides the backend's declared ones (a preset name or a dict). Returns a ``Result``."""
     if dtype not in TOLERANCES:
         raise ValueError(f"dtype must be 'float64' or 'float32', got {dtype!r}")
-    b = bk.load(backend, conventions)
     names = None if cases in (None, "all") else ([cases] if isinstance(cases, str) else cases)
+    # The case names first: a wrong name is reported without loading the backend.
+    chosen = list(select(names))
+    b = bk.load(backend, conventions)
     tol = TOLERANCES[dtype]
     results = []
-    for case in select(names):
+    for case in chosen:
         r = run_case(b, case, dtype, tol, timeout, explain)
         r["_case"] = case
         results.append(r)
