@@ -6,11 +6,10 @@
 use unispine::loss::spwm::SpwmConfig;
 use unispine::loss::LossConfig;
 
-type SetS = fn(&mut SpwmConfig, f64);
-type SetL = fn(&mut LossConfig, f64);
+/// A setting's name, how to set it, the values accepted and the values refused.
+type Case<C> = (&'static str, fn(&mut C, f64), Vec<f64>, Vec<f64>);
 
-/// (field, setter, accepted values, refused values)
-fn spwm_cases() -> Vec<(&'static str, SetS, Vec<f64>, Vec<f64>)> {
+fn spwm_cases() -> Vec<Case<SpwmConfig>> {
     let (inf, nan) = (f64::INFINITY, f64::NAN);
     vec![
         (
@@ -64,7 +63,7 @@ fn spwm_cases() -> Vec<(&'static str, SetS, Vec<f64>, Vec<f64>)> {
     ]
 }
 
-fn loss_cases() -> Vec<(&'static str, SetL, Vec<f64>, Vec<f64>)> {
+fn loss_cases() -> Vec<Case<LossConfig>> {
     let (inf, nan) = (f64::INFINITY, f64::NAN);
     vec![
         (
@@ -88,52 +87,43 @@ fn loss_cases() -> Vec<(&'static str, SetL, Vec<f64>, Vec<f64>)> {
     ]
 }
 
-#[test]
-fn spwm_settings_are_checked_at_both_ends_of_every_range() {
-    assert!(SpwmConfig::default().validate().is_ok());
-    for (field, set, good, bad) in spwm_cases() {
-        for v in good {
-            let mut c = SpwmConfig::default();
+/// Each case of `cases` on a default `C`: the accepted values pass `validate`, the refused
+/// ones fail it with an error naming `prefix.field`.
+fn check<C: Default>(prefix: &str, cases: Vec<Case<C>>, validate: fn(&C) -> unispine::Result<()>) {
+    assert!(
+        validate(&C::default()).is_ok(),
+        "{prefix}: the defaults refused"
+    );
+    for (field, set, good, bad) in cases {
+        for (v, ok) in good
+            .into_iter()
+            .map(|v| (v, true))
+            .chain(bad.into_iter().map(|v| (v, false)))
+        {
+            let mut c = C::default();
             set(&mut c, v);
-            assert!(c.validate().is_ok(), "spwm.{field} = {v} refused");
-        }
-        for v in bad {
-            let mut c = SpwmConfig::default();
-            set(&mut c, v);
-            let e = c
-                .validate()
-                .err()
-                .unwrap_or_else(|| panic!("spwm.{field} = {v} accepted"));
-            assert!(
-                e.to_string().contains(&format!("spwm.{field}")),
-                "{field} = {v}: {e}"
-            );
+            match (validate(&c), ok) {
+                (Ok(()), true) => {}
+                (Err(e), false) => {
+                    assert!(
+                        e.to_string().contains(&format!("{prefix}.{field}")),
+                        "{field} = {v}: {e}"
+                    )
+                }
+                (r, _) => panic!("{prefix}.{field} = {v}: {r:?}"),
+            }
         }
     }
 }
 
 #[test]
+fn spwm_settings_are_checked_at_both_ends_of_every_range() {
+    check("spwm", spwm_cases(), SpwmConfig::validate);
+}
+
+#[test]
 fn loss_settings_are_checked_at_both_ends_of_every_range() {
-    assert!(LossConfig::default().validate().is_ok());
-    for (field, set, good, bad) in loss_cases() {
-        for v in good {
-            let mut c = LossConfig::default();
-            set(&mut c, v);
-            assert!(c.validate().is_ok(), "loss.{field} = {v} refused");
-        }
-        for v in bad {
-            let mut c = LossConfig::default();
-            set(&mut c, v);
-            let e = c
-                .validate()
-                .err()
-                .unwrap_or_else(|| panic!("loss.{field} = {v} accepted"));
-            assert!(
-                e.to_string().contains(&format!("loss.{field}")),
-                "{field} = {v}: {e}"
-            );
-        }
-    }
+    check("loss", loss_cases(), LossConfig::validate);
 }
 
 /// The three named loss settings, as their documents state them: 3DGS / X-Gaussian's
