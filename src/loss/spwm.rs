@@ -115,11 +115,13 @@ impl SpwmConfig {
         if !(0.0..=1.0).contains(&self.quantile) {
             return bad("quantile", "must be in [0, 1]");
         }
-        if !(0.0..1.0).contains(&self.tau_max) {
-            return bad("tau_max", "must be in [0, 1)");
+        // tau = 1 is allowed, as in the trainer's settings table: the gate's denominator
+        // 1 - tau + 1e-6 stays positive, and the gate is then 0 wherever A < 1.
+        if !(0.0..=1.0).contains(&self.tau_max) {
+            return bad("tau_max", "must be in [0, 1]");
         }
-        if !(0.0..1.0).contains(&self.fixed_tau) {
-            return bad("fixed_tau", "must be in [0, 1)");
+        if !(0.0..=1.0).contains(&self.fixed_tau) {
+            return bad("fixed_tau", "must be in [0, 1]");
         }
         if !(self.gate_temperature.is_finite() && self.gate_temperature > 0.0) {
             return bad("gate_temperature", "must be finite and > 0");

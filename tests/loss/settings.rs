@@ -45,14 +45,14 @@ fn spwm_cases() -> Vec<Case<SpwmConfig>> {
         (
             "tau_max",
             |c, v| c.tau_max = v,
-            vec![0.0, 1.0 - 1e-9],
-            vec![-1e-9, 1.0, nan],
+            vec![0.0, 1.0],
+            vec![-1e-9, 1.0 + 1e-9, nan],
         ),
         (
             "fixed_tau",
             |c, v| c.fixed_tau = v,
-            vec![0.0, 1.0 - 1e-9],
-            vec![-1e-9, 1.0, nan],
+            vec![0.0, 1.0],
+            vec![-1e-9, 1.0 + 1e-9, nan],
         ),
         (
             "gate_temperature",
@@ -146,5 +146,46 @@ fn named_loss_settings_hold_their_data_terms() {
             (0.2, 1e-3, 1e-6),
             "{term:?}"
         );
+    }
+}
+
+/// The gate's thresholds may reach 1 (both checks allow it): the soft gate's denominator
+/// `1 - tau + 1e-6` stays positive, so the gate is finite, 0 wherever the attention is below 1,
+/// for the adaptive and the fixed threshold alike.
+#[test]
+fn a_gate_threshold_of_one_gives_a_finite_gate() {
+    use unispine::image2d::Image2d;
+    use unispine::loss::spwm;
+    let (w, h) = (23, 17);
+    let gt = Image2d::from_vec(
+        w,
+        h,
+        (0..w * h)
+            .map(|p| ((p * 37 % 101) as f64 / 100.0).powi(2))
+            .collect(),
+    );
+    for adaptive in [true, false] {
+        let cfg = SpwmConfig {
+            adaptive_gate: adaptive,
+            quantile: 1.0,
+            tau_max: 1.0,
+            fixed_tau: 1.0,
+            ..SpwmConfig::default()
+        };
+        assert!(cfg.validate().is_ok());
+        let a = spwm::attention(&gt, &cfg);
+        for (g, att) in a.gate.data.iter().zip(&a.attention.data) {
+            assert!(
+                g.is_finite() && (0.0..=1.0).contains(g),
+                "adaptive {adaptive}: {g}"
+            );
+            if *att < a.tau {
+                assert_eq!(*g, 0.0, "adaptive {adaptive}");
+            }
+        }
+        assert!(spwm::view_prior(&gt, &cfg)
+            .data
+            .iter()
+            .all(|v| v.is_finite()));
     }
 }
