@@ -4,6 +4,7 @@
 //! training iterations (loss, gradient, Adam) give the same bits for 1, 2 and 8 threads, every
 //! SIMD path, and a workspace reused across batches of different sizes.
 
+use crate::common::panic_text;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use unispine::field::gemm;
@@ -481,14 +482,4 @@ fn empty_products_do_nothing_and_short_operands_are_refused() {
         }
     }
     assert_eq!(gemm::flops(3, 5, 7), 210);
-}
-
-/// The message of the panic `f` raises (`&str` or `String`), or `None` when it returns.
-fn panic_text(f: impl FnOnce() + std::panic::UnwindSafe) -> Option<String> {
-    std::panic::catch_unwind(f).err().map(|e| {
-        e.downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| e.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "a panic without a message".into())
-    })
 }

@@ -3,6 +3,7 @@
 //! against its per-pixel definition written out here; and every term refusing images of
 //! different sizes.
 
+use crate::common::panic_text;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use unispine::image2d::Image2d;
@@ -73,17 +74,6 @@ fn each_pixel_s_gradient_is_its_own_definition_across_chunks() {
             );
         }
     }
-}
-
-/// The message of a panic of `f`, if it panicked.
-fn panic_text(f: impl FnOnce() + std::panic::UnwindSafe) -> Option<String> {
-    let p = std::panic::catch_unwind(f).err()?;
-    Some(
-        p.downcast_ref::<String>()
-            .cloned()
-            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-            .unwrap_or_default(),
-    )
 }
 
 #[test]
